@@ -1,0 +1,99 @@
+//! Resource bounds a decoder checks *before* it allocates.
+
+use super::error::{Error, ErrorKind, Result};
+
+/// Upper bounds on what a file may make the decoder allocate or render.
+///
+/// Every length, count and decompressed size read from a file is checked against these
+/// before memory is reserved for it, so a hostile file costs at most `max_alloc` bytes
+/// however its fields are set. The defaults admit any realistic image; an embedding
+/// program that decodes untrusted files may tighten them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Limits {
+    /// Largest header width or height, in pixels.
+    pub max_dimension: u32,
+    /// Largest number of Gaussians.
+    pub max_gaussians: u32,
+    /// Largest chunk payload, in bytes.
+    pub max_chunk_len: u32,
+    /// Largest decompressed size of one attribute payload, in bytes.
+    pub max_decompressed: u64,
+    /// Total bytes the decoder may hold for chunk payloads, decompressed data and records.
+    pub max_alloc: u64,
+    /// Largest number of output pixels a render may be asked for.
+    pub max_output_pixels: u64,
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Limits {
+            max_dimension: 1 << 16,
+            max_gaussians: 1 << 23,
+            max_chunk_len: 1 << 28,
+            max_decompressed: 1 << 28,
+            max_alloc: 1 << 31,
+            max_output_pixels: 1 << 27,
+        }
+    }
+}
+
+impl Limits {
+    /// Bounds with no practical limit; for trusted input only.
+    pub fn unlimited() -> Self {
+        Limits {
+            max_dimension: u32::MAX,
+            max_gaussians: u32::MAX,
+            max_chunk_len: u32::MAX,
+            max_decompressed: u64::MAX,
+            max_alloc: u64::MAX,
+            max_output_pixels: u64::MAX,
+        }
+    }
+
+    /// Refuse an output size of more than `max_output_pixels` (or a zero dimension).
+    pub fn check_output(&self, width: u32, height: u32) -> Result<()> {
+        if width == 0 || height == 0 {
+            return Err(Error::new(
+                ErrorKind::InvalidValue,
+                format!("output size {width}x{height} is empty"),
+            ));
+        }
+        let px = u64::from(width) * u64::from(height);
+        if px > self.max_output_pixels {
+            return Err(Error::new(
+                ErrorKind::LimitExceeded,
+                format!("output {width}x{height} exceeds {} pixels", self.max_output_pixels),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Running total of the bytes a decode has reserved, against `Limits::max_alloc`.
+#[derive(Debug)]
+pub(crate) struct AllocBudget {
+    left: u64,
+}
+
+impl AllocBudget {
+    pub fn new(limits: &Limits) -> Self {
+        AllocBudget { left: limits.max_alloc }
+    }
+
+    /// Account for `bytes` about to be allocated, or refuse.
+    pub fn reserve(&mut self, bytes: u64, what: &str) -> Result<()> {
+        if bytes > self.left {
+            return Err(Error::new(
+                ErrorKind::LimitExceeded,
+                format!("{what} needs {bytes} bytes, {} left of the allocation limit", self.left),
+            ));
+        }
+        self.left -= bytes;
+        Ok(())
+    }
+
+    /// Give back bytes that were freed.
+    pub fn release(&mut self, bytes: u64) {
+        self.left = self.left.saturating_add(bytes);
+    }
+}

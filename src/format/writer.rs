@@ -1,0 +1,81 @@
+//! Encoder: records (plus optional ancillary chunks) to bytes.
+
+use super::chunk::{framed_len, write_chunk, ChunkType, RawChunk, SIGNATURE};
+use super::error::{invalid, Result};
+use super::meta::{CompressionMeta, MAX_SETTINGS_LEN};
+use super::records::Records;
+use std::io::Write;
+
+/// What goes into a file besides the records.
+#[derive(Clone, Debug)]
+pub struct WriteOptions {
+    /// zstd level for attribute payloads (the writer keeps whichever of stored and zstd is smaller).
+    pub zstd_level: i32,
+    /// PSNR of the stored result, when the encoder measured it.
+    pub psnr: Option<f32>,
+    /// Encoder settings for `gCRM`; `None` writes no `gCRM` chunk.
+    pub settings: Option<String>,
+    /// Further ancillary chunks, written in order after the attributes.
+    pub ancillary: Vec<RawChunk>,
+}
+
+impl Default for WriteOptions {
+    fn default() -> Self {
+        WriteOptions { zstd_level: 19, psnr: None, settings: Some(String::new()), ancillary: Vec::new() }
+    }
+}
+
+/// Write a complete file and return its size in bytes.
+///
+/// Chunk order: signature, `GHDR`, `gCRM`, `GPOS`, `GCOV`, `GCOL`, `GOPA`, the given
+/// ancillary chunks, `GEND`. Every payload is built first so that `gCRM` can state the
+/// exact size of the file it is part of.
+pub fn write_file<W: Write>(w: &mut W, records: &Records, opts: &WriteOptions) -> Result<u64> {
+    if !records.is_consistent() {
+        return Err(invalid("records do not match the header's count"));
+    }
+    for a in &opts.ancillary {
+        if a.ty.is_critical() || !a.ty.is_valid() || a.ty == ChunkType::COMPRESSION_META {
+            return Err(invalid(format!("{} cannot be passed as an ancillary chunk", a.ty)));
+        }
+    }
+    let mut body: Vec<(ChunkType, Vec<u8>)> = vec![
+        (ChunkType::POSITIONS, records.positions.to_payload(opts.zstd_level)?),
+        (ChunkType::COVARIANCE, records.covariance.to_payload(opts.zstd_level)?),
+        (ChunkType::COLORS, records.colors.to_payload(opts.zstd_level)?),
+    ];
+    if let Some(o) = &records.opacity {
+        body.push((ChunkType::OPACITY, o.to_payload(opts.zstd_level)?));
+    }
+    body.extend(opts.ancillary.iter().map(|c| (c.ty, c.data.clone())));
+
+    let header = records.header.to_bytes();
+    let mut total = SIGNATURE.len() as u64 + framed_len(header.len()) + framed_len(0);
+    total += body.iter().map(|(_, d)| framed_len(d.len())).sum::<u64>();
+    let meta = match &opts.settings {
+        Some(s) if s.len() > MAX_SETTINGS_LEN => return Err(invalid(format!("settings of {} bytes", s.len()))),
+        Some(s) => {
+            total += framed_len(CompressionMeta::payload_len(s));
+            Some(CompressionMeta::new(&records.header, records.opacity.is_some(), total, opts.psnr, s.clone()))
+        }
+        None => None,
+    };
+
+    w.write_all(&SIGNATURE)?;
+    write_chunk(w, ChunkType::HEADER, &header)?;
+    if let Some(m) = meta {
+        write_chunk(w, ChunkType::COMPRESSION_META, &m.to_payload())?;
+    }
+    for (ty, data) in &body {
+        write_chunk(w, *ty, data)?;
+    }
+    write_chunk(w, ChunkType::END, &[])?;
+    Ok(total)
+}
+
+/// [`write_file`] into a new vector.
+pub fn to_bytes(records: &Records, opts: &WriteOptions) -> Result<Vec<u8>> {
+    let mut v = Vec::new();
+    write_file(&mut v, records, opts)?;
+    Ok(v)
+}

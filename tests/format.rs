@@ -1,0 +1,205 @@
+//! Container tests: the spec's worked example, roundtrips, streaming, corruption.
+
+use gsi::format::{self, BitDepths, ChunkType, ErrorKind, Limits, Records, WriteOptions};
+use gsi::model::{Blend, CovParam};
+use gsi::synth::{random_scene, SceneSpec};
+use std::io::Read;
+
+/// Bytes of the hex dump in format-spec.md §9: on each line of the code block, the
+/// two-digit hex tokens after the offset, up to the first word that is not one.
+fn spec_hexdump() -> Vec<u8> {
+    let spec = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/format-spec.md")).unwrap();
+    let section = spec.split("## 9. Worked example").nth(1).expect("spec has §9");
+    let block = section.split("```").nth(1).expect("§9 has a code block");
+    let mut bytes = Vec::new();
+    for line in block.lines().skip(2) {
+        for tok in line.split_whitespace().skip(1) {
+            match u8::from_str_radix(tok, 16) {
+                Ok(b) if tok.len() == 2 => bytes.push(b),
+                _ => break,
+            }
+        }
+    }
+    bytes
+}
+
+#[test]
+fn spec_worked_example_matches_the_encoder() {
+    assert_eq!(spec_hexdump(), format::tests_support::tiny_file());
+}
+
+fn sample_files() -> Vec<(Records, Vec<u8>)> {
+    let mut out = Vec::new();
+    for (seed, blend, cov, n) in [
+        (1, Blend::Sum, CovParam::Cholesky, 0),
+        (2, Blend::Sum, CovParam::LogScaleRotation, 1),
+        (3, Blend::Alpha, CovParam::LogScaleRotation, 50),
+        (4, Blend::Alpha, CovParam::Cholesky, 700),
+    ] {
+        let scene = random_scene(seed, SceneSpec { cov_param: cov, ..SceneSpec::new(64, 40, n, blend) });
+        let records = Records::from_scene(&scene, BitDepths::default());
+        let opts = WriteOptions { psnr: Some(31.5), settings: Some("seed=1".into()), ..Default::default() };
+        let bytes = format::to_bytes(&records, &opts).unwrap();
+        out.push((records, bytes));
+    }
+    out
+}
+
+#[test]
+fn records_roundtrip_exactly() {
+    for (records, bytes) in sample_files() {
+        let f = format::read_file(&bytes[..], Limits::default()).unwrap();
+        assert_eq!(f.records, records);
+        assert_eq!(f.file_bytes, bytes.len() as u64);
+        let meta = f.metadata.expect("gCRM written");
+        assert_eq!(meta.file_bytes, bytes.len() as u64);
+        assert_eq!(meta.psnr, Some(31.5));
+        assert_eq!(meta.settings, "seed=1");
+        // Writing what was read gives the same bytes.
+        let opts = WriteOptions { psnr: meta.psnr, settings: Some(meta.settings), ..Default::default() };
+        assert_eq!(format::to_bytes(&f.records, &opts).unwrap(), bytes);
+    }
+}
+
+#[test]
+fn model_roundtrip_is_lossless_through_records() {
+    for (records, _) in sample_files() {
+        let scene = records.to_scene();
+        let again = Records {
+            positions: gsi::format::Attribute::quantize(&scene.gaussians.positions, records.positions.quantizers.clone().try_into().unwrap()),
+            covariance: gsi::format::Attribute::quantize(&scene.gaussians.cov, records.covariance.quantizers.clone().try_into().unwrap()),
+            colors: gsi::format::Attribute::quantize(&scene.gaussians.colors, records.colors.quantizers.clone().try_into().unwrap()),
+            ..records.clone()
+        };
+        assert_eq!(again, records);
+    }
+}
+
+/// Yields one byte per `read` call: the decoder must not depend on read sizes.
+struct OneByte<'a>(&'a [u8]);
+impl Read for OneByte<'_> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        if self.0.is_empty() || buf.is_empty() {
+            return Ok(0);
+        }
+        buf[0] = self.0[0];
+        self.0 = &self.0[1..];
+        Ok(1)
+    }
+}
+
+#[test]
+fn streaming_is_independent_of_read_sizes() {
+    for (_, bytes) in sample_files() {
+        let whole = format::read_file(&bytes[..], Limits::default()).unwrap();
+        let trickled = format::read_file(OneByte(&bytes), Limits::default()).unwrap();
+        assert_eq!(whole, trickled);
+    }
+}
+
+#[test]
+fn header_is_available_before_attributes() {
+    let (_, bytes) = sample_files().pop().unwrap();
+    // Only the signature and GHDR are present: the header still reads.
+    let mut dec = format::Decoder::new(&bytes[..8 + 12 + 18]);
+    let h = dec.read_header().unwrap();
+    assert_eq!((h.width, h.height, h.count), (64, 40, 700));
+    assert_eq!(dec.finish().unwrap_err().kind(), ErrorKind::Truncated);
+}
+
+#[test]
+fn every_truncation_is_refused() {
+    for (_, bytes) in sample_files() {
+        for len in 0..bytes.len() {
+            let e = format::read_file(&bytes[..len], Limits::default()).unwrap_err();
+            assert_eq!(e.kind(), ErrorKind::Truncated, "len {len}: {e}");
+        }
+    }
+}
+
+#[test]
+fn every_bit_flip_is_refused() {
+    // Every byte is signature, framing, or covered by a CRC: no flip may go unnoticed.
+    let (_, bytes) = &sample_files()[2];
+    for at in 0..bytes.len() {
+        for bit in 0..8 {
+            let mut b = bytes.clone();
+            b[at] ^= 1 << bit;
+            assert!(format::read_file(&b[..], Limits::default()).is_err(), "flip of bit {bit} at byte {at} accepted");
+        }
+    }
+}
+
+#[test]
+fn crc_errors_name_chunk_and_offset() {
+    let (_, mut bytes) = sample_files().remove(2);
+    let f = format::read_file(&bytes[..], Limits::default()).unwrap();
+    let col = f.chunks.iter().find(|c| c.ty == ChunkType::COLORS).unwrap();
+    bytes[col.offset as usize + 8 + 3] ^= 0x40;
+    let e = format::read_file(&bytes[..], Limits::default()).unwrap_err();
+    assert_eq!(e.kind(), ErrorKind::CrcMismatch);
+    assert_eq!(e.chunk(), Some(ChunkType::COLORS));
+    assert_eq!(e.offset(), Some(col.offset));
+    assert!(e.to_string().starts_with(&format!("CRC mismatch in chunk GCOL at byte {}", col.offset)), "{e}");
+}
+
+#[test]
+fn huge_length_field_is_refused_without_allocating() {
+    let (_, bytes) = sample_files().remove(3);
+    let f = format::read_file(&bytes[..], Limits::default()).unwrap();
+    let gpos = f.chunks.iter().find(|c| c.ty == ChunkType::POSITIONS).unwrap();
+    // Everything before GPOS, then a GPOS head claiming ~4 GiB, then a few bytes.
+    let mut b = bytes[..gpos.offset as usize].to_vec();
+    b.extend_from_slice(&0xFFFF_FFF0u32.to_be_bytes());
+    b.extend_from_slice(b"GPOS");
+    b.extend_from_slice(&[0u8; 100]);
+    // Too long for the chunk limit:
+    let e = format::read_file(&b[..], Limits::default()).unwrap_err();
+    assert_eq!(e.kind(), ErrorKind::LimitExceeded, "{e}");
+    // Within the limit but the stream is short: only the present bytes are read.
+    let unlimited = Limits::unlimited();
+    let e = format::read_file(&b[..], unlimited).unwrap_err();
+    assert_eq!(e.kind(), ErrorKind::Truncated, "{e}");
+}
+
+#[test]
+fn limits_are_enforced_before_allocation() {
+    let (_, bytes) = sample_files().remove(3);
+    let tight = |f: &dyn Fn(&mut Limits)| {
+        let mut l = Limits::default();
+        f(&mut l);
+        format::read_file(&bytes[..], l).unwrap_err().kind()
+    };
+    assert_eq!(tight(&|l| l.max_gaussians = 699), ErrorKind::LimitExceeded);
+    assert_eq!(tight(&|l| l.max_dimension = 63), ErrorKind::LimitExceeded);
+    assert_eq!(tight(&|l| l.max_chunk_len = 100), ErrorKind::LimitExceeded);
+    assert_eq!(tight(&|l| l.max_alloc = 1000), ErrorKind::LimitExceeded);
+    assert_eq!(tight(&|l| l.max_decompressed = 100), ErrorKind::LimitExceeded);
+}
+
+#[test]
+fn unknown_chunks_follow_their_criticality() {
+    let records = Records::from_scene(&format::tests_support::tiny_scene(), BitDepths::default());
+    let extra = |ty: &[u8; 4]| {
+        let opts = WriteOptions {
+            ancillary: vec![format::RawChunk { ty: ChunkType(*ty), data: vec![1, 2, 3] }],
+            ..Default::default()
+        };
+        format::to_bytes(&records, &opts)
+    };
+    // Ancillary: kept, file reads.
+    let f = format::read_file(&extra(b"zzZz").unwrap()[..], Limits::default()).unwrap();
+    assert_eq!(f.ancillary.len(), 1);
+    // The writer refuses to emit an unknown critical chunk…
+    assert!(extra(b"ZZzz").is_err());
+    // …and the reader refuses one that is spliced in.
+    let mut b = format::tests_support::tiny_file();
+    let end = b.len() - 12;
+    let mut chunk = Vec::new();
+    chunk.extend_from_slice(&0u32.to_be_bytes());
+    chunk.extend_from_slice(b"ZZzz");
+    chunk.extend_from_slice(&format::chunk_crc(ChunkType(*b"ZZzz"), &[]).to_be_bytes());
+    b.splice(end..end, chunk);
+    let e = format::read_file(&b[..], Limits::default()).unwrap_err();
+    assert_eq!(e.kind(), ErrorKind::UnknownCriticalChunk);
+}
