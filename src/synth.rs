@@ -93,5 +93,443 @@ pub fn random_scene(seed: u64, spec: SceneSpec) -> Scene {
     if spec.with_opacity {
         g.opacity = Some((0..spec.count).map(|_| rng.range(0.05, 1.0)).collect());
     }
-    Scene { width: spec.width, height: spec.height, blend: spec.blend, cov_param: spec.cov_param, gaussians: g }
+    Scene {
+        width: spec.width,
+        height: spec.height,
+        blend: spec.blend,
+        cov_param: spec.cov_param,
+        gaussians: g,
+    }
+}
+
+/// One file of the checked-in corpus (`corpus/`), as the generator makes it.
+pub struct CorpusFile {
+    /// File name without directory; invalid files are named `<error kind>--<what>.gsi`.
+    pub name: String,
+    pub bytes: Vec<u8>,
+    /// `None` for a valid file, else the kind of error a decoder must report.
+    pub expect: Option<crate::format::ErrorKind>,
+}
+
+/// The deterministic corpus: valid files of many shapes and malformed files of every
+/// error kind. `cargo run --example gen_corpus` writes it; `tests/corpus.rs` checks the
+/// checked-in copy is exactly what this returns.
+pub fn corpus() -> Vec<CorpusFile> {
+    corpus::valid()
+        .into_iter()
+        .chain(corpus::invalid())
+        .collect()
+}
+
+mod corpus {
+    use super::{random_scene, CorpusFile, SceneSpec};
+    use crate::format::{self, BitDepths, ChunkType, ErrorKind, RawChunk, Records, WriteOptions};
+    use crate::model::{Blend, CovParam, GaussianSet, Scene};
+
+    fn write(records: &Records, settings: &str) -> Vec<u8> {
+        let opts = WriteOptions {
+            settings: Some(settings.into()),
+            ..WriteOptions::default()
+        };
+        format::to_bytes(records, &opts).expect("in-memory write")
+    }
+
+    fn valid_file(name: &str, records: &Records) -> CorpusFile {
+        CorpusFile {
+            name: format!("{name}.gsi"),
+            bytes: write(records, "generator=gsi-synth"),
+            expect: None,
+        }
+    }
+
+    fn random(seed: u64, spec: SceneSpec) -> Records {
+        Records::from_scene(&random_scene(seed, spec), BitDepths::default())
+    }
+
+    pub fn valid() -> Vec<CorpusFile> {
+        use Blend::{Alpha, Sum};
+        use CovParam::{Cholesky, LogScaleRotation as Lsr};
+        let spec = |w, h, n, blend, cov_param, with_opacity| SceneSpec {
+            cov_param,
+            with_opacity,
+            ..SceneSpec::new(w, h, n, blend)
+        };
+        let mut out = vec![
+            CorpusFile {
+                name: "tiny.gsi".into(),
+                bytes: format::tests_support::tiny_file(),
+                expect: None,
+            },
+            valid_file(
+                "empty-0-gaussians",
+                &random(1, spec(32, 24, 0, Sum, Cholesky, false)),
+            ),
+            valid_file(
+                "one-pixel-1-gaussian",
+                &random(2, spec(1, 1, 1, Sum, Lsr, false)),
+            ),
+            valid_file("row-1x200", &random(3, spec(200, 1, 20, Sum, Lsr, false))),
+            valid_file(
+                "column-1x200",
+                &random(4, spec(1, 200, 20, Alpha, Cholesky, true)),
+            ),
+            valid_file(
+                "sum-cholesky-100",
+                &random(5, spec(64, 48, 100, Sum, Cholesky, false)),
+            ),
+            valid_file(
+                "sum-lsr-500-opacity",
+                &random(6, spec(96, 64, 500, Sum, Lsr, true)),
+            ),
+            valid_file(
+                "alpha-lsr-500-opacity",
+                &random(7, spec(96, 64, 500, Alpha, Lsr, true)),
+            ),
+            valid_file(
+                "alpha-cholesky-300-no-opacity",
+                &random(8, spec(80, 80, 300, Alpha, Cholesky, false)),
+            ),
+            valid_file(
+                "sum-lsr-3000",
+                &random(9, spec(192, 128, 3000, Sum, Lsr, false)),
+            ),
+            valid_file(
+                "alpha-lsr-3000-opacity",
+                &random(10, spec(192, 128, 3000, Alpha, Lsr, true)),
+            ),
+        ];
+        // Low bit depths, as an aggressive encoder would choose.
+        let low = BitDepths {
+            position: 10,
+            covariance: 6,
+            color: 5,
+            opacity: 4,
+        };
+        let scene = random_scene(11, spec(128, 96, 800, Alpha, Lsr, true));
+        out.push(valid_file(
+            "alpha-lsr-800-low-bits",
+            &Records::from_scene(&scene, low),
+        ));
+        out.push(valid_file(
+            "degenerate-covariances-cholesky",
+            &degenerate(Cholesky),
+        ));
+        out.push(valid_file("degenerate-covariances-lsr", &degenerate(Lsr)));
+        // An unknown ancillary chunk is skipped.
+        let records = random(12, spec(40, 30, 30, Sum, Lsr, false));
+        let opts = WriteOptions {
+            ancillary: vec![RawChunk {
+                ty: ChunkType(*b"zzTe"),
+                data: b"skip me".to_vec(),
+            }],
+            ..WriteOptions::default()
+        };
+        out.push(CorpusFile {
+            name: "unknown-ancillary-chunk.gsi".into(),
+            bytes: format::to_bytes(&records, &opts).expect("in-memory write"),
+            expect: None,
+        });
+        out
+    }
+
+    /// Records whose covariances are singular, vanishing or enormous, and Gaussians far
+    /// outside the image: the renderer's clamps (spec §6.1–6.2) must keep them finite.
+    fn degenerate(cov_param: CovParam) -> Records {
+        let extremes: Vec<[f32; 3]> = match cov_param {
+            CovParam::Cholesky => vec![
+                [0.0, 0.0, 0.0],
+                [0.0, 1.0, 0.0],
+                [1e-30, 0.0, 1e-30],
+                [3e38, -3e38, 3e38],
+                [16.0, 16.0, 0.0],
+                [0.05, 0.05, 0.0],
+            ],
+            CovParam::LogScaleRotation => vec![
+                [-1e30, -1e30, 0.0],
+                [1e30, 1e30, 1e30],
+                [-30.0, 3.0, 0.7],
+                [-3.0, -3.0, -3e38],
+                [0.0, -40.0, 1.0],
+                [-2.5, -9.0, 0.3],
+            ],
+        };
+        let n = extremes.len() * 3;
+        let positions = (0..n).map(|i| match i % 3 {
+            0 => [0.5, 0.5],
+            1 => [-1e6, 3e6],
+            _ => [1.01, -0.01],
+        });
+        let g = GaussianSet {
+            positions: positions.collect(),
+            cov: (0..n).map(|i| extremes[i / 3]).collect(),
+            colors: (0..n).map(|i| [1.0, -0.5, i as f32 * 0.1]).collect(),
+            opacity: Some((0..n).map(|i| (i % 4) as f32 / 3.0).collect()),
+        };
+        let scene = Scene {
+            width: 24,
+            height: 16,
+            blend: Blend::Alpha,
+            cov_param,
+            gaussians: g,
+        };
+        Records::from_scene(
+            &scene,
+            BitDepths {
+                position: 24,
+                covariance: 24,
+                color: 8,
+                opacity: 8,
+            },
+        )
+    }
+
+    /// Split a file into its chunks (no validation: the input is our own valid file).
+    fn chunks(bytes: &[u8]) -> Vec<(ChunkType, Vec<u8>)> {
+        let mut out = Vec::new();
+        let mut at = 8;
+        while at < bytes.len() {
+            let len = u32::from_be_bytes(bytes[at..at + 4].try_into().unwrap()) as usize;
+            let ty = ChunkType(bytes[at + 4..at + 8].try_into().unwrap());
+            out.push((ty, bytes[at + 8..at + 8 + len].to_vec()));
+            at += 12 + len;
+        }
+        out
+    }
+
+    /// Frame chunks into a file with correct CRCs.
+    fn assemble(chunks: &[(ChunkType, Vec<u8>)]) -> Vec<u8> {
+        let mut out = format::SIGNATURE.to_vec();
+        for (ty, data) in chunks {
+            out.extend_from_slice(&(data.len() as u32).to_be_bytes());
+            out.extend_from_slice(&ty.0);
+            out.extend_from_slice(data);
+            out.extend_from_slice(&format::chunk_crc(*ty, data).to_be_bytes());
+        }
+        out
+    }
+
+    pub fn invalid() -> Vec<CorpusFile> {
+        let base_records = random(20, SceneSpec::new(48, 32, 64, Blend::Alpha));
+        let base = write(&base_records, "generator=gsi-synth");
+        let parts = chunks(&base);
+        let idx = |ty: ChunkType| {
+            parts
+                .iter()
+                .position(|(t, _)| *t == ty)
+                .expect("chunk present")
+        };
+        // Re-frame after editing one chunk's payload (CRC stays valid).
+        let edit = |ty: ChunkType, f: &dyn Fn(&mut Vec<u8>)| {
+            let mut p = parts.clone();
+            f(&mut p[idx(ty)].1);
+            assemble(&p)
+        };
+        let mut files: Vec<(ErrorKind, &str, Vec<u8>)> = Vec::new();
+        use ErrorKind as K;
+        files.push((K::Truncated, "empty-file", Vec::new()));
+        files.push((K::Truncated, "signature-only", format::SIGNATURE.to_vec()));
+        files.push((
+            K::Truncated,
+            "cut-inside-gcol",
+            base[..parts_offset(&parts, idx(ChunkType::COLORS)) + 20].to_vec(),
+        ));
+        files.push((K::Truncated, "no-gend", base[..base.len() - 12].to_vec()));
+        let mut crlf = base.clone();
+        crlf.splice(4..6, [b'\n']); // "\r\n" -> "\n", as a text-mode transfer would do
+        files.push((K::BadSignature, "text-mode-mangled", crlf));
+        files.push((K::BadSignature, "png-signature", {
+            let mut b = base.clone();
+            b[1..4].copy_from_slice(b"PNG");
+            b
+        }));
+        files.push((K::CrcMismatch, "bad-crc-gcol", {
+            let mut b = base.clone();
+            let at = parts_offset(&parts, idx(ChunkType::COLORS)) + 8 + 40;
+            b[at] ^= 0x10;
+            b
+        }));
+        files.push((K::UnknownCriticalChunk, "unknown-critical-chunk", {
+            let mut p = parts.clone();
+            p.insert(p.len() - 1, (ChunkType(*b"GXYZ"), vec![0; 4]));
+            assemble(&p)
+        }));
+        files.push((K::BadChunkType, "chunk-type-not-letters", {
+            let mut p = parts.clone();
+            p.insert(p.len() - 1, (ChunkType(*b"g1 ?"), vec![]));
+            assemble(&p)
+        }));
+        files.push((K::ChunkOrder, "ghdr-not-first", {
+            let mut p = parts.clone();
+            p.swap(0, idx(ChunkType::POSITIONS));
+            assemble(&p)
+        }));
+        files.push((K::ChunkOrder, "duplicate-gpos", {
+            let mut p = parts.clone();
+            p.insert(
+                idx(ChunkType::POSITIONS),
+                parts[idx(ChunkType::POSITIONS)].clone(),
+            );
+            assemble(&p)
+        }));
+        files.push((K::ChunkOrder, "duplicate-ghdr", {
+            let mut p = parts.clone();
+            p.insert(1, parts[0].clone());
+            assemble(&p)
+        }));
+        files.push((K::MissingChunk, "no-gcol", {
+            let mut p = parts.clone();
+            p.remove(idx(ChunkType::COLORS));
+            assemble(&p)
+        }));
+        files.push((
+            K::BadChunkLength,
+            "ghdr-17-bytes",
+            edit(ChunkType::HEADER, &|d| {
+                d.pop();
+            }),
+        ));
+        files.push((K::BadChunkLength, "gend-with-payload", {
+            let mut p = parts.clone();
+            p.last_mut().unwrap().1 = vec![0];
+            assemble(&p)
+        }));
+        files.push((
+            K::BadChunkLength,
+            "gpos-shorter-than-preamble",
+            edit(ChunkType::POSITIONS, &|d| d.truncate(10)),
+        ));
+        files.push((
+            K::UnsupportedVersion,
+            "version-2",
+            edit(ChunkType::HEADER, &|d| d[0] = 2),
+        ));
+        files.push((
+            K::InvalidValue,
+            "zero-width",
+            edit(ChunkType::HEADER, &|d| d[2..6].fill(0)),
+        ));
+        files.push((
+            K::InvalidValue,
+            "zero-height",
+            edit(ChunkType::HEADER, &|d| d[6..10].fill(0)),
+        ));
+        files.push((
+            K::InvalidValue,
+            "blend-mode-9",
+            edit(ChunkType::HEADER, &|d| d[14] = 9),
+        ));
+        files.push((
+            K::InvalidValue,
+            "cov-param-5",
+            edit(ChunkType::HEADER, &|d| d[15] = 5),
+        ));
+        files.push((
+            K::LimitExceeded,
+            "count-4-billion",
+            edit(ChunkType::HEADER, &|d| d[10..14].fill(0xff)),
+        ));
+        files.push((
+            K::LimitExceeded,
+            "width-4-billion",
+            edit(ChunkType::HEADER, &|d| d[2..6].fill(0xff)),
+        ));
+        files.push((K::LimitExceeded, "chunk-length-4-gib", {
+            let mut b = base[..parts_offset(&parts, idx(ChunkType::POSITIONS))].to_vec();
+            b.extend_from_slice(&0xFFFF_FF00u32.to_be_bytes());
+            b.extend_from_slice(b"GPOS");
+            b.extend_from_slice(&[0; 64]);
+            b
+        }));
+        files.push((
+            K::InvalidValue,
+            "count-mismatch-packed-length",
+            edit(ChunkType::HEADER, &|d| d[13] ^= 1),
+        ));
+        files.push((
+            K::InvalidValue,
+            "quantizer-25-bits",
+            edit(ChunkType::COLORS, &|d| d[1] = 25),
+        ));
+        files.push((
+            K::InvalidValue,
+            "quantizer-nan-range",
+            edit(ChunkType::COLORS, &|d| {
+                d[2..6].copy_from_slice(&f32::NAN.to_be_bytes())
+            }),
+        ));
+        files.push((
+            K::InvalidValue,
+            "quantizer-infinite-range",
+            edit(ChunkType::POSITIONS, &|d| {
+                d[6..10].copy_from_slice(&f32::INFINITY.to_be_bytes())
+            }),
+        ));
+        files.push((
+            K::InvalidValue,
+            "quantizer-reversed-range",
+            edit(ChunkType::COVARIANCE, &|d| {
+                let (lo, hi) = (d[2..6].to_vec(), d[6..10].to_vec());
+                d[2..6].copy_from_slice(&hi);
+                d[6..10].copy_from_slice(&lo);
+            }),
+        ));
+        files.push((
+            K::InvalidValue,
+            "wrong-component-count",
+            edit(ChunkType::COLORS, &|d| d[0] = 4),
+        ));
+        files.push((
+            K::InvalidValue,
+            "compression-method-7",
+            edit(ChunkType::COLORS, &|d| d[28] = 7),
+        ));
+        files.push((
+            K::Decompression,
+            "zstd-garbage",
+            edit(ChunkType::COVARIANCE, &|d| {
+                d[28] = 1;
+                for b in &mut d[33..] {
+                    *b = 0xA5;
+                }
+            }),
+        ));
+        files.push((
+            K::Decompression,
+            "zstd-bomb",
+            edit(ChunkType::COLORS, &|d| {
+                // A valid zstd frame of 64 KiB of zeros where ~200 bytes are declared.
+                d[28] = 1;
+                d.truncate(33);
+                d.extend_from_slice(&zstd::bulk::compress(&vec![0u8; 1 << 16], 3).unwrap());
+            }),
+        ));
+        files.push((
+            K::InvalidValue,
+            "gcrm-nan-psnr",
+            edit(ChunkType::COMPRESSION_META, &|d| {
+                d[9] = 1;
+                d[22..26].copy_from_slice(&f32::NAN.to_be_bytes());
+            }),
+        ));
+        files.push((
+            K::InvalidValue,
+            "gcrm-settings-not-utf8",
+            edit(ChunkType::COMPRESSION_META, &|d| {
+                d.extend_from_slice(&[0xff, 0xfe])
+            }),
+        ));
+        files
+            .into_iter()
+            .map(|(kind, what, bytes)| CorpusFile {
+                name: format!("{}--{what}.gsi", kind.name()),
+                bytes,
+                expect: Some(kind),
+            })
+            .collect()
+    }
+
+    /// Byte offset of chunk `i` in the file `chunks` came from.
+    fn parts_offset(parts: &[(ChunkType, Vec<u8>)], i: usize) -> usize {
+        8 + parts[..i].iter().map(|(_, d)| 12 + d.len()).sum::<usize>()
+    }
 }

@@ -8,8 +8,12 @@ use std::io::Read;
 /// Bytes of the hex dump in format-spec.md §9: on each line of the code block, the
 /// two-digit hex tokens after the offset, up to the first word that is not one.
 fn spec_hexdump() -> Vec<u8> {
-    let spec = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/format-spec.md")).unwrap();
-    let section = spec.split("## 9. Worked example").nth(1).expect("spec has §9");
+    let spec =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/format-spec.md")).unwrap();
+    let section = spec
+        .split("## 9. Worked example")
+        .nth(1)
+        .expect("spec has §9");
     let block = section.split("```").nth(1).expect("§9 has a code block");
     let mut bytes = Vec::new();
     for line in block.lines().skip(2) {
@@ -36,9 +40,19 @@ fn sample_files() -> Vec<(Records, Vec<u8>)> {
         (3, Blend::Alpha, CovParam::LogScaleRotation, 50),
         (4, Blend::Alpha, CovParam::Cholesky, 700),
     ] {
-        let scene = random_scene(seed, SceneSpec { cov_param: cov, ..SceneSpec::new(64, 40, n, blend) });
+        let scene = random_scene(
+            seed,
+            SceneSpec {
+                cov_param: cov,
+                ..SceneSpec::new(64, 40, n, blend)
+            },
+        );
         let records = Records::from_scene(&scene, BitDepths::default());
-        let opts = WriteOptions { psnr: Some(31.5), settings: Some("seed=1".into()), ..Default::default() };
+        let opts = WriteOptions {
+            psnr: Some(31.5),
+            settings: Some("seed=1".into()),
+            ..Default::default()
+        };
         let bytes = format::to_bytes(&records, &opts).unwrap();
         out.push((records, bytes));
     }
@@ -56,7 +70,11 @@ fn records_roundtrip_exactly() {
         assert_eq!(meta.psnr, Some(31.5));
         assert_eq!(meta.settings, "seed=1");
         // Writing what was read gives the same bytes.
-        let opts = WriteOptions { psnr: meta.psnr, settings: Some(meta.settings), ..Default::default() };
+        let opts = WriteOptions {
+            psnr: meta.psnr,
+            settings: Some(meta.settings),
+            ..Default::default()
+        };
         assert_eq!(format::to_bytes(&f.records, &opts).unwrap(), bytes);
     }
 }
@@ -66,9 +84,18 @@ fn model_roundtrip_is_lossless_through_records() {
     for (records, _) in sample_files() {
         let scene = records.to_scene();
         let again = Records {
-            positions: gsi::format::Attribute::quantize(&scene.gaussians.positions, records.positions.quantizers.clone().try_into().unwrap()),
-            covariance: gsi::format::Attribute::quantize(&scene.gaussians.cov, records.covariance.quantizers.clone().try_into().unwrap()),
-            colors: gsi::format::Attribute::quantize(&scene.gaussians.colors, records.colors.quantizers.clone().try_into().unwrap()),
+            positions: gsi::format::Attribute::quantize(
+                &scene.gaussians.positions,
+                records.positions.quantizers.clone().try_into().unwrap(),
+            ),
+            covariance: gsi::format::Attribute::quantize(
+                &scene.gaussians.cov,
+                records.covariance.quantizers.clone().try_into().unwrap(),
+            ),
+            colors: gsi::format::Attribute::quantize(
+                &scene.gaussians.colors,
+                records.colors.quantizers.clone().try_into().unwrap(),
+            ),
             ..records.clone()
         };
         assert_eq!(again, records);
@@ -125,7 +152,10 @@ fn every_bit_flip_is_refused() {
         for bit in 0..8 {
             let mut b = bytes.clone();
             b[at] ^= 1 << bit;
-            assert!(format::read_file(&b[..], Limits::default()).is_err(), "flip of bit {bit} at byte {at} accepted");
+            assert!(
+                format::read_file(&b[..], Limits::default()).is_err(),
+                "flip of bit {bit} at byte {at} accepted"
+            );
         }
     }
 }
@@ -140,14 +170,24 @@ fn crc_errors_name_chunk_and_offset() {
     assert_eq!(e.kind(), ErrorKind::CrcMismatch);
     assert_eq!(e.chunk(), Some(ChunkType::COLORS));
     assert_eq!(e.offset(), Some(col.offset));
-    assert!(e.to_string().starts_with(&format!("CRC mismatch in chunk GCOL at byte {}", col.offset)), "{e}");
+    assert!(
+        e.to_string().starts_with(&format!(
+            "CRC mismatch in chunk GCOL at byte {}",
+            col.offset
+        )),
+        "{e}"
+    );
 }
 
 #[test]
 fn huge_length_field_is_refused_without_allocating() {
     let (_, bytes) = sample_files().remove(3);
     let f = format::read_file(&bytes[..], Limits::default()).unwrap();
-    let gpos = f.chunks.iter().find(|c| c.ty == ChunkType::POSITIONS).unwrap();
+    let gpos = f
+        .chunks
+        .iter()
+        .find(|c| c.ty == ChunkType::POSITIONS)
+        .unwrap();
     // Everything before GPOS, then a GPOS head claiming ~4 GiB, then a few bytes.
     let mut b = bytes[..gpos.offset as usize].to_vec();
     b.extend_from_slice(&0xFFFF_FFF0u32.to_be_bytes());
@@ -174,7 +214,10 @@ fn limits_are_enforced_before_allocation() {
     assert_eq!(tight(&|l| l.max_dimension = 63), ErrorKind::LimitExceeded);
     assert_eq!(tight(&|l| l.max_chunk_len = 100), ErrorKind::LimitExceeded);
     assert_eq!(tight(&|l| l.max_alloc = 1000), ErrorKind::LimitExceeded);
-    assert_eq!(tight(&|l| l.max_decompressed = 100), ErrorKind::LimitExceeded);
+    assert_eq!(
+        tight(&|l| l.max_decompressed = 100),
+        ErrorKind::LimitExceeded
+    );
 }
 
 #[test]
@@ -182,7 +225,10 @@ fn unknown_chunks_follow_their_criticality() {
     let records = Records::from_scene(&format::tests_support::tiny_scene(), BitDepths::default());
     let extra = |ty: &[u8; 4]| {
         let opts = WriteOptions {
-            ancillary: vec![format::RawChunk { ty: ChunkType(*ty), data: vec![1, 2, 3] }],
+            ancillary: vec![format::RawChunk {
+                ty: ChunkType(*ty),
+                data: vec![1, 2, 3],
+            }],
             ..Default::default()
         };
         format::to_bytes(&records, &opts)

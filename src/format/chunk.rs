@@ -48,7 +48,11 @@ impl fmt::Display for ChunkType {
         if self.is_valid() {
             f.write_str(self.as_str())
         } else {
-            write!(f, "{:02x}{:02x}{:02x}{:02x}", self.0[0], self.0[1], self.0[2], self.0[3])
+            write!(
+                f,
+                "{:02x}{:02x}{:02x}{:02x}",
+                self.0[0], self.0[1], self.0[2], self.0[3]
+            )
         }
     }
 }
@@ -88,7 +92,10 @@ pub fn chunk_crc(ty: ChunkType, data: &[u8]) -> u32 {
 /// Write one framed chunk.
 pub fn write_chunk<W: Write>(w: &mut W, ty: ChunkType, data: &[u8]) -> Result<()> {
     let len = u32::try_from(data.len()).map_err(|_| {
-        Error::new(ErrorKind::LimitExceeded, format!("chunk {ty} payload of {} bytes", data.len()))
+        Error::new(
+            ErrorKind::LimitExceeded,
+            format!("chunk {ty} payload of {} bytes", data.len()),
+        )
     })?;
     w.write_u32::<BigEndian>(len)?;
     w.write_all(&ty.0)?;

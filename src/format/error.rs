@@ -86,7 +86,13 @@ pub struct Error {
 
 impl Error {
     pub fn new(kind: ErrorKind, detail: impl Into<String>) -> Self {
-        Error { kind, chunk: None, offset: None, detail: detail.into(), source: None }
+        Error {
+            kind,
+            chunk: None,
+            offset: None,
+            detail: detail.into(),
+            source: None,
+        }
     }
 
     pub(crate) fn io(e: std::io::Error) -> Self {
@@ -95,7 +101,13 @@ impl Error {
         } else {
             ErrorKind::Io
         };
-        Error { kind, chunk: None, offset: None, detail: String::new(), source: Some(e) }
+        Error {
+            kind,
+            chunk: None,
+            offset: None,
+            detail: String::new(),
+            source: Some(e),
+        }
     }
 
     /// Attach the chunk and offset, keeping any that are already set (the innermost wins).

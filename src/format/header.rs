@@ -75,10 +75,19 @@ impl Header {
     /// Parse and validate a `GHDR` payload (its length is checked by the framing layer).
     pub fn parse(b: &[u8], limits: &Limits) -> Result<Header> {
         if b.len() != HEADER_LEN {
-            return Err(Error::new(ErrorKind::BadChunkLength, format!("GHDR is {} bytes, not {HEADER_LEN}", b.len())));
+            return Err(Error::new(
+                ErrorKind::BadChunkLength,
+                format!("GHDR is {} bytes, not {HEADER_LEN}", b.len()),
+            ));
         }
         if b[0] != VERSION_MAJOR {
-            return Err(Error::new(ErrorKind::UnsupportedVersion, format!("major version {} (this decoder reads {VERSION_MAJOR})", b[0])));
+            return Err(Error::new(
+                ErrorKind::UnsupportedVersion,
+                format!(
+                    "major version {} (this decoder reads {VERSION_MAJOR})",
+                    b[0]
+                ),
+            ));
         }
         let width = BigEndian::read_u32(&b[2..6]);
         let height = BigEndian::read_u32(&b[6..10]);
@@ -89,13 +98,19 @@ impl Header {
         if width > limits.max_dimension || height > limits.max_dimension {
             return Err(Error::new(
                 ErrorKind::LimitExceeded,
-                format!("image size {width}x{height} exceeds {} per side", limits.max_dimension),
+                format!(
+                    "image size {width}x{height} exceeds {} per side",
+                    limits.max_dimension
+                ),
             ));
         }
         if count > limits.max_gaussians {
             return Err(Error::new(
                 ErrorKind::LimitExceeded,
-                format!("{count} Gaussians exceeds the limit of {}", limits.max_gaussians),
+                format!(
+                    "{count} Gaussians exceeds the limit of {}",
+                    limits.max_gaussians
+                ),
             ));
         }
         let blend = match b[14] {
@@ -147,8 +162,14 @@ mod tests {
             Header::parse(&b, &l).unwrap_err().kind()
         };
         assert_eq!(kind(&|b| b[0] = 2), ErrorKind::UnsupportedVersion);
-        assert_eq!(kind(&|b| b[2..6].copy_from_slice(&[0; 4])), ErrorKind::InvalidValue);
-        assert_eq!(kind(&|b| b[10..14].copy_from_slice(&[0xff; 4])), ErrorKind::LimitExceeded);
+        assert_eq!(
+            kind(&|b| b[2..6].copy_from_slice(&[0; 4])),
+            ErrorKind::InvalidValue
+        );
+        assert_eq!(
+            kind(&|b| b[10..14].copy_from_slice(&[0xff; 4])),
+            ErrorKind::LimitExceeded
+        );
         assert_eq!(kind(&|b| b[14] = 7), ErrorKind::InvalidValue);
         assert_eq!(kind(&|b| b[15] = 2), ErrorKind::InvalidValue);
         assert_eq!(kind(&|b| b[16] = 1), ErrorKind::InvalidValue);

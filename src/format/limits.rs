@@ -62,7 +62,10 @@ impl Limits {
         if px > self.max_output_pixels {
             return Err(Error::new(
                 ErrorKind::LimitExceeded,
-                format!("output {width}x{height} exceeds {} pixels", self.max_output_pixels),
+                format!(
+                    "output {width}x{height} exceeds {} pixels",
+                    self.max_output_pixels
+                ),
             ));
         }
         Ok(())
@@ -77,7 +80,9 @@ pub(crate) struct AllocBudget {
 
 impl AllocBudget {
     pub fn new(limits: &Limits) -> Self {
-        AllocBudget { left: limits.max_alloc }
+        AllocBudget {
+            left: limits.max_alloc,
+        }
     }
 
     /// Account for `bytes` about to be allocated, or refuse.
@@ -85,7 +90,10 @@ impl AllocBudget {
         if bytes > self.left {
             return Err(Error::new(
                 ErrorKind::LimitExceeded,
-                format!("{what} needs {bytes} bytes, {} left of the allocation limit", self.left),
+                format!(
+                    "{what} needs {bytes} bytes, {} left of the allocation limit",
+                    self.left
+                ),
             ));
         }
         self.left -= bytes;

@@ -33,16 +33,34 @@ pub struct CompressionMeta {
 pub fn ratios(header: &Header, has_opacity: bool, file_bytes: u64) -> (u8, f32, f32, f32) {
     let dof = if has_opacity { 9u8 } else { 8 };
     let px = f64::from(header.width) * f64::from(header.height);
-    let cr_dof = if header.count == 0 { 0.0 } else { 3.0 * px / (f64::from(dof) * f64::from(header.count)) };
+    let cr_dof = if header.count == 0 {
+        0.0
+    } else {
+        3.0 * px / (f64::from(dof) * f64::from(header.count))
+    };
     let cr_bytes = 3.0 * px / file_bytes.max(1) as f64;
     let bpp = 8.0 * file_bytes as f64 / px;
     (dof, cr_dof as f32, cr_bytes as f32, bpp as f32)
 }
 
 impl CompressionMeta {
-    pub fn new(header: &Header, has_opacity: bool, file_bytes: u64, psnr: Option<f32>, settings: String) -> Self {
+    pub fn new(
+        header: &Header,
+        has_opacity: bool,
+        file_bytes: u64,
+        psnr: Option<f32>,
+        settings: String,
+    ) -> Self {
         let (dof_per_gaussian, cr_dof, cr_bytes, bpp) = ratios(header, has_opacity, file_bytes);
-        CompressionMeta { file_bytes, dof_per_gaussian, cr_dof, cr_bytes, bpp, psnr: psnr.filter(|p| p.is_finite()), settings }
+        CompressionMeta {
+            file_bytes,
+            dof_per_gaussian,
+            cr_dof,
+            cr_bytes,
+            bpp,
+            psnr: psnr.filter(|p| p.is_finite()),
+            settings,
+        }
     }
 
     /// Payload length, known before the ratios are (the writer needs it to size the file).
@@ -55,7 +73,12 @@ impl CompressionMeta {
         out.write_u64::<BigEndian>(self.file_bytes).unwrap();
         out.push(self.dof_per_gaussian);
         out.push(if self.psnr.is_some() { FLAG_PSNR } else { 0 });
-        for v in [self.cr_dof, self.cr_bytes, self.bpp, self.psnr.unwrap_or(0.0)] {
+        for v in [
+            self.cr_dof,
+            self.cr_bytes,
+            self.bpp,
+            self.psnr.unwrap_or(0.0),
+        ] {
             out.write_f32::<BigEndian>(v).unwrap();
         }
         out.extend_from_slice(self.settings.as_bytes());
@@ -64,15 +87,24 @@ impl CompressionMeta {
 
     pub fn parse(p: &[u8]) -> Result<CompressionMeta> {
         if p.len() < META_FIXED_LEN || p.len() > META_FIXED_LEN + MAX_SETTINGS_LEN {
-            return Err(Error::new(ErrorKind::BadChunkLength, format!("gCRM of {} bytes", p.len())));
+            return Err(Error::new(
+                ErrorKind::BadChunkLength,
+                format!("gCRM of {} bytes", p.len()),
+            ));
         }
         let f = |at: usize| BigEndian::read_f32(&p[at..at + 4]);
         let (cr_dof, cr_bytes, bpp, psnr) = (f(10), f(14), f(18), f(22));
-        if ![cr_dof, cr_bytes, bpp, psnr].iter().all(|v| v.is_finite() && *v >= 0.0) {
+        if ![cr_dof, cr_bytes, bpp, psnr]
+            .iter()
+            .all(|v| v.is_finite() && *v >= 0.0)
+        {
             return Err(invalid("gCRM holds a negative or non-finite figure"));
         }
         if !matches!(p[8], 8 | 9) {
-            return Err(invalid(format!("gCRM counts {} parameters per Gaussian", p[8])));
+            return Err(invalid(format!(
+                "gCRM counts {} parameters per Gaussian",
+                p[8]
+            )));
         }
         let settings = std::str::from_utf8(&p[META_FIXED_LEN..])
             .map_err(|_| invalid("gCRM settings are not UTF-8"))?

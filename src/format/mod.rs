@@ -47,8 +47,16 @@ pub mod tests_support {
 
     /// [`tiny_scene`] written with 8-bit quantizers and no `gCRM`.
     pub fn tiny_file() -> Vec<u8> {
-        let bits = BitDepths { position: 8, covariance: 8, color: 8, opacity: 8 };
-        let opts = WriteOptions { settings: None, ..WriteOptions::default() };
+        let bits = BitDepths {
+            position: 8,
+            covariance: 8,
+            color: 8,
+            opacity: 8,
+        };
+        let opts = WriteOptions {
+            settings: None,
+            ..WriteOptions::default()
+        };
         to_bytes(&Records::from_scene(&tiny_scene(), bits), &opts).expect("in-memory write")
     }
 }

@@ -24,13 +24,22 @@ impl Quantizer {
     /// [`MAX_BITS`] bits, and `min == max` exactly when `bits == 0`.
     pub fn validate(&self) -> Result<()> {
         if self.bits > MAX_BITS {
-            return Err(invalid(format!("quantizer of {} bits (at most {MAX_BITS})", self.bits)));
+            return Err(invalid(format!(
+                "quantizer of {} bits (at most {MAX_BITS})",
+                self.bits
+            )));
         }
         if !(self.min.is_finite() && self.max.is_finite()) {
-            return Err(invalid(format!("quantizer range [{}, {}] not finite", self.min, self.max)));
+            return Err(invalid(format!(
+                "quantizer range [{}, {}] not finite",
+                self.min, self.max
+            )));
         }
         if self.min > self.max {
-            return Err(invalid(format!("quantizer range [{}, {}] reversed", self.min, self.max)));
+            return Err(invalid(format!(
+                "quantizer range [{}, {}] reversed",
+                self.min, self.max
+            )));
         }
         if self.bits == 0 && self.min != self.max {
             return Err(invalid("0-bit quantizer with min != max"));
@@ -47,12 +56,24 @@ impl Quantizer {
             hi = hi.max(x);
         }
         if lo > hi {
-            return Quantizer { bits: 0, min: 0.0, max: 0.0 };
+            return Quantizer {
+                bits: 0,
+                min: 0.0,
+                max: 0.0,
+            };
         }
         if bits == 0 || lo == hi {
-            return Quantizer { bits: 0, min: lo, max: lo };
+            return Quantizer {
+                bits: 0,
+                min: lo,
+                max: lo,
+            };
         }
-        Quantizer { bits: bits.min(MAX_BITS), min: lo, max: hi }
+        Quantizer {
+            bits: bits.min(MAX_BITS),
+            min: lo,
+            max: hi,
+        }
     }
 
     /// Largest code, `2^bits − 1`.
@@ -91,7 +112,8 @@ pub fn packed_len(count: u64, quantizers: &[Quantizer]) -> u64 {
 /// MSB first in `bits` bits, the whole stream zero-padded to a byte.
 pub fn pack(codes: &[u32], count: usize, quantizers: &[Quantizer]) -> Vec<u8> {
     debug_assert_eq!(codes.len(), count * quantizers.len());
-    let mut bits: BitVec<u8, Msb0> = BitVec::with_capacity(packed_len(count as u64, quantizers) as usize * 8);
+    let mut bits: BitVec<u8, Msb0> =
+        BitVec::with_capacity(packed_len(count as u64, quantizers) as usize * 8);
     for (plane, q) in codes.chunks(count.max(1)).zip(quantizers) {
         let w = usize::from(q.bits);
         if w == 0 {
@@ -129,7 +151,18 @@ mod tests {
 
     #[test]
     fn pack_is_msb_first_and_planar() {
-        let qs = [Quantizer { bits: 3, min: 0.0, max: 1.0 }, Quantizer { bits: 2, min: 0.0, max: 1.0 }];
+        let qs = [
+            Quantizer {
+                bits: 3,
+                min: 0.0,
+                max: 1.0,
+            },
+            Quantizer {
+                bits: 2,
+                min: 0.0,
+                max: 1.0,
+            },
+        ];
         // plane 0: 0b101, 0b011; plane 1: 0b10, 0b01  -> 101 011 10 01 -> 0b10101110 0b01000000
         let packed = pack(&[5, 3, 2, 1], 2, &qs);
         assert_eq!(packed, vec![0b1010_1110, 0b0100_0000]);
@@ -138,7 +171,11 @@ mod tests {
 
     #[test]
     fn codes_roundtrip_through_values() {
-        let q = Quantizer { bits: 16, min: -0.25, max: 1.5 };
+        let q = Quantizer {
+            bits: 16,
+            min: -0.25,
+            max: 1.5,
+        };
         for code in [0, 1, 2, 12345, 65534, 65535] {
             assert_eq!(q.quantize(q.dequantize(code)), code);
         }
@@ -150,17 +187,68 @@ mod tests {
 
     #[test]
     fn fit_collapses_constants() {
-        assert_eq!(Quantizer::fit(8, [0.5, 0.5]), Quantizer { bits: 0, min: 0.5, max: 0.5 });
-        assert_eq!(Quantizer::fit(8, []), Quantizer { bits: 0, min: 0.0, max: 0.0 });
-        assert_eq!(Quantizer::fit(8, [1.0, f32::NAN, -1.0]), Quantizer { bits: 8, min: -1.0, max: 1.0 });
+        assert_eq!(
+            Quantizer::fit(8, [0.5, 0.5]),
+            Quantizer {
+                bits: 0,
+                min: 0.5,
+                max: 0.5
+            }
+        );
+        assert_eq!(
+            Quantizer::fit(8, []),
+            Quantizer {
+                bits: 0,
+                min: 0.0,
+                max: 0.0
+            }
+        );
+        assert_eq!(
+            Quantizer::fit(8, [1.0, f32::NAN, -1.0]),
+            Quantizer {
+                bits: 8,
+                min: -1.0,
+                max: 1.0
+            }
+        );
     }
 
     #[test]
     fn validate_rejects_bad_descriptors() {
-        assert!(Quantizer { bits: 25, min: 0.0, max: 1.0 }.validate().is_err());
-        assert!(Quantizer { bits: 8, min: 1.0, max: 0.0 }.validate().is_err());
-        assert!(Quantizer { bits: 8, min: f32::NAN, max: 0.0 }.validate().is_err());
-        assert!(Quantizer { bits: 0, min: 0.0, max: 1.0 }.validate().is_err());
-        assert!(Quantizer { bits: 24, min: -1e30, max: 1e30 }.validate().is_ok());
+        assert!(Quantizer {
+            bits: 25,
+            min: 0.0,
+            max: 1.0
+        }
+        .validate()
+        .is_err());
+        assert!(Quantizer {
+            bits: 8,
+            min: 1.0,
+            max: 0.0
+        }
+        .validate()
+        .is_err());
+        assert!(Quantizer {
+            bits: 8,
+            min: f32::NAN,
+            max: 0.0
+        }
+        .validate()
+        .is_err());
+        assert!(Quantizer {
+            bits: 0,
+            min: 0.0,
+            max: 1.0
+        }
+        .validate()
+        .is_err());
+        assert!(Quantizer {
+            bits: 24,
+            min: -1e30,
+            max: 1e30
+        }
+        .validate()
+        .is_ok());
     }
 }

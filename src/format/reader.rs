@@ -52,7 +52,10 @@ fn length_range(ty: ChunkType) -> Option<(u32, u32)> {
         ChunkType::POSITIONS => (pre(2) as u32, u32::MAX),
         ChunkType::COVARIANCE | ChunkType::COLORS => (pre(3) as u32, u32::MAX),
         ChunkType::OPACITY => (pre(1) as u32, u32::MAX),
-        ChunkType::COMPRESSION_META => (META_FIXED_LEN as u32, (META_FIXED_LEN + MAX_SETTINGS_LEN) as u32),
+        ChunkType::COMPRESSION_META => (
+            META_FIXED_LEN as u32,
+            (META_FIXED_LEN + MAX_SETTINGS_LEN) as u32,
+        ),
         _ => return None,
     })
 }
@@ -64,7 +67,10 @@ impl<R: Read> Decoder<R> {
 
     pub fn with_limits(input: R, limits: Limits) -> Self {
         Decoder {
-            input: Counting { inner: input, pos: 0 },
+            input: Counting {
+                inner: input,
+                pos: 0,
+            },
             budget: AllocBudget::new(&limits),
             limits,
             header: None,
@@ -79,13 +85,18 @@ impl<R: Read> Decoder<R> {
             return Ok(h);
         }
         let mut sig = [0u8; 8];
-        self.input.read_exact(&mut sig).map_err(|e| Error::io(e).at(None, 0))?;
+        self.input
+            .read_exact(&mut sig)
+            .map_err(|e| Error::io(e).at(None, 0))?;
         if sig != SIGNATURE {
             return Err(Error::new(ErrorKind::BadSignature, "").at(None, 0));
         }
         let (offset, c) = self.next_chunk()?;
         if c.ty != ChunkType::HEADER {
-            return Err(Error::new(ErrorKind::ChunkOrder, "first chunk must be GHDR").at(Some(c.ty), offset));
+            return Err(
+                Error::new(ErrorKind::ChunkOrder, "first chunk must be GHDR")
+                    .at(Some(c.ty), offset),
+            );
         }
         let h = Header::parse(&c.data, &self.limits).map_err(|e| e.at(Some(c.ty), offset))?;
         self.header = Some(h);
@@ -108,10 +119,16 @@ impl<R: Read> Decoder<R> {
                 }
             };
             let (limits, budget) = (&self.limits, &mut self.budget);
-            let mut attr = |comps| Attribute::parse(&c.data, comps, header.count, limits, budget).map_err(here);
+            let mut attr = |comps| {
+                Attribute::parse(&c.data, comps, header.count, limits, budget).map_err(here)
+            };
             match c.ty {
                 ChunkType::END => break,
-                ChunkType::HEADER => return Err(Error::new(ErrorKind::ChunkOrder, "appears twice").at(Some(c.ty), offset)),
+                ChunkType::HEADER => {
+                    return Err(
+                        Error::new(ErrorKind::ChunkOrder, "appears twice").at(Some(c.ty), offset)
+                    )
+                }
                 ChunkType::POSITIONS => {
                     once(pos.is_some())?;
                     pos = Some(attr(2)?);
@@ -133,13 +150,21 @@ impl<R: Read> Decoder<R> {
                     meta = Some(CompressionMeta::parse(&c.data).map_err(here)?);
                 }
                 ty if ty.is_critical() => {
-                    return Err(Error::new(ErrorKind::UnknownCriticalChunk, "").at(Some(ty), offset));
+                    return Err(
+                        Error::new(ErrorKind::UnknownCriticalChunk, "").at(Some(ty), offset)
+                    );
                 }
                 _ => ancillary.push(c),
             }
         }
         let end = self.input.pos;
-        let missing = |name: &str| Error::new(ErrorKind::MissingChunk, format!("no {name} chunk before GEND")).at(None, end);
+        let missing = |name: &str| {
+            Error::new(
+                ErrorKind::MissingChunk,
+                format!("no {name} chunk before GEND"),
+            )
+            .at(None, end)
+        };
         let records = Records {
             header,
             positions: pos.ok_or_else(|| missing("GPOS"))?,
@@ -147,7 +172,13 @@ impl<R: Read> Decoder<R> {
             colors: col.ok_or_else(|| missing("GCOL"))?,
             opacity: opa,
         };
-        Ok(GsiFile { records, metadata: meta, ancillary, chunks: self.chunks, file_bytes: end })
+        Ok(GsiFile {
+            records,
+            metadata: meta,
+            ancillary,
+            chunks: self.chunks,
+            file_bytes: end,
+        })
     }
 
     /// Read one framed chunk, checking type, length range, limits and CRC.
@@ -165,26 +196,50 @@ impl<R: Read> Decoder<R> {
         let (len, ty) = chunk::parse_chunk_head(&head);
         let fail = |kind, detail: String| Err(Error::new(kind, detail).at(Some(ty), offset));
         if !ty.is_valid() {
-            return fail(ErrorKind::BadChunkType, "type bytes must be ASCII letters".into());
+            return fail(
+                ErrorKind::BadChunkType,
+                "type bytes must be ASCII letters".into(),
+            );
         }
         if let Some((lo, hi)) = length_range(ty) {
             if len < lo || len > hi {
-                return fail(ErrorKind::BadChunkLength, format!("{len} bytes, allowed {lo}..={hi}"));
+                return fail(
+                    ErrorKind::BadChunkLength,
+                    format!("{len} bytes, allowed {lo}..={hi}"),
+                );
             }
         }
         if len > self.limits.max_chunk_len {
-            return fail(ErrorKind::LimitExceeded, format!("{len} bytes exceeds the chunk limit of {}", self.limits.max_chunk_len));
+            return fail(
+                ErrorKind::LimitExceeded,
+                format!(
+                    "{len} bytes exceeds the chunk limit of {}",
+                    self.limits.max_chunk_len
+                ),
+            );
         }
-        self.budget.reserve(u64::from(len), "chunk payload").map_err(|e| e.at(Some(ty), offset))?;
+        self.budget
+            .reserve(u64::from(len), "chunk payload")
+            .map_err(|e| e.at(Some(ty), offset))?;
         let data = chunk::read_payload(&mut self.input, len).map_err(|e| e.at(Some(ty), offset))?;
         let mut crc = [0u8; 4];
-        self.input.read_exact(&mut crc).map_err(|e| Error::io(e).at(Some(ty), offset))?;
+        self.input
+            .read_exact(&mut crc)
+            .map_err(|e| Error::io(e).at(Some(ty), offset))?;
         let stored = BigEndian::read_u32(&crc);
         let computed = chunk::chunk_crc(ty, &data);
         if stored != computed {
-            return fail(ErrorKind::CrcMismatch, format!("stored {stored:#010x}, computed {computed:#010x}"));
+            return fail(
+                ErrorKind::CrcMismatch,
+                format!("stored {stored:#010x}, computed {computed:#010x}"),
+            );
         }
-        self.chunks.push(ChunkInfo { ty, offset, length: len, crc32: stored });
+        self.chunks.push(ChunkInfo {
+            ty,
+            offset,
+            length: len,
+            crc32: stored,
+        });
         Ok((offset, RawChunk { ty, data }))
     }
 }

@@ -41,7 +41,10 @@ impl Attribute {
         for (c, q) in quantizers.iter().enumerate() {
             codes.extend(values.iter().map(|v| q.quantize(v[c])));
         }
-        Attribute { quantizers: quantizers.to_vec(), codes }
+        Attribute {
+            quantizers: quantizers.to_vec(),
+            codes,
+        }
     }
 
     /// Quantize with `bits[c]`-bit quantizers fitted to each component's range.
@@ -52,7 +55,12 @@ impl Attribute {
 
     /// Dequantize into records of `C` components (`C` must equal `components()`).
     pub fn values<const C: usize>(&self) -> Vec<[f32; C]> {
-        assert_eq!(C, self.components(), "attribute has {} components", self.components());
+        assert_eq!(
+            C,
+            self.components(),
+            "attribute has {} components",
+            self.components()
+        );
         let n = self.count();
         let mut out = vec![[0f32; C]; n];
         for (c, q) in self.quantizers.iter().enumerate() {
@@ -97,10 +105,16 @@ impl Attribute {
     ) -> Result<Attribute> {
         let pre = attribute_preamble_len(components);
         if p.len() < pre {
-            return Err(Error::new(ErrorKind::BadChunkLength, format!("{} bytes, shorter than its {pre}-byte preamble", p.len())));
+            return Err(Error::new(
+                ErrorKind::BadChunkLength,
+                format!("{} bytes, shorter than its {pre}-byte preamble", p.len()),
+            ));
         }
         if usize::from(p[0]) != components {
-            return Err(invalid(format!("{} components, expected {components}", p[0])));
+            return Err(invalid(format!(
+                "{} components, expected {components}",
+                p[0]
+            )));
         }
         let quantizers: Vec<Quantizer> = p[1..1 + 9 * components]
             .chunks_exact(9)
@@ -117,17 +131,28 @@ impl Attribute {
         let declared = u64::from(BigEndian::read_u32(&p[pre - 4..pre]));
         let expected = quant::packed_len(u64::from(count), &quantizers);
         if declared != expected {
-            return Err(invalid(format!("packed length {declared}, expected {expected} for {count} records")));
+            return Err(invalid(format!(
+                "packed length {declared}, expected {expected} for {count} records"
+            )));
         }
         if expected > limits.max_decompressed {
-            return Err(Error::new(ErrorKind::LimitExceeded, format!("{expected} packed bytes exceeds {}", limits.max_decompressed)));
+            return Err(Error::new(
+                ErrorKind::LimitExceeded,
+                format!(
+                    "{expected} packed bytes exceeds {}",
+                    limits.max_decompressed
+                ),
+            ));
         }
         let data = &p[pre..];
         let zipped;
         let packed: &[u8] = match method {
             METHOD_STORED => {
                 if data.len() as u64 != expected {
-                    return Err(Error::new(ErrorKind::BadChunkLength, format!("{} stored bytes, expected {expected}", data.len())));
+                    return Err(Error::new(
+                        ErrorKind::BadChunkLength,
+                        format!("{} stored bytes, expected {expected}", data.len()),
+                    ));
                 }
                 data
             }
@@ -137,7 +162,10 @@ impl Attribute {
                 zipped = zstd::bulk::decompress(data, expected as usize)
                     .map_err(|e| Error::new(ErrorKind::Decompression, e.to_string()))?;
                 if zipped.len() as u64 != expected {
-                    return Err(Error::new(ErrorKind::Decompression, format!("{} bytes decompressed, expected {expected}", zipped.len())));
+                    return Err(Error::new(
+                        ErrorKind::Decompression,
+                        format!("{} bytes decompressed, expected {expected}", zipped.len()),
+                    ));
                 }
                 &zipped
             }
@@ -175,7 +203,12 @@ pub struct BitDepths {
 
 impl Default for BitDepths {
     fn default() -> Self {
-        BitDepths { position: 16, covariance: 12, color: 8, opacity: 8 }
+        BitDepths {
+            position: 16,
+            covariance: 12,
+            color: 8,
+            opacity: 8,
+        }
     }
 }
 
@@ -185,12 +218,22 @@ impl Records {
     pub fn from_scene(scene: &Scene, bits: BitDepths) -> Records {
         let g = &scene.gaussians;
         assert!(g.is_consistent(), "inconsistent Gaussian set");
-        let opacity = g.opacity.as_ref().filter(|o| o.iter().any(|&a| a != 1.0)).map(|o| {
-            let o: Vec<[f32; 1]> = o.iter().map(|&a| [a]).collect();
-            Attribute::fit(&o, [bits.opacity])
-        });
+        let opacity = g
+            .opacity
+            .as_ref()
+            .filter(|o| o.iter().any(|&a| a != 1.0))
+            .map(|o| {
+                let o: Vec<[f32; 1]> = o.iter().map(|&a| [a]).collect();
+                Attribute::fit(&o, [bits.opacity])
+            });
         Records {
-            header: Header::new(scene.width, scene.height, g.len() as u32, scene.blend, scene.cov_param),
+            header: Header::new(
+                scene.width,
+                scene.height,
+                g.len() as u32,
+                scene.blend,
+                scene.cov_param,
+            ),
             positions: Attribute::fit(&g.positions, [bits.position; 2]),
             covariance: Attribute::fit(&g.cov, [bits.covariance; 3]),
             colors: Attribute::fit(&g.colors, [bits.color; 3]),
@@ -210,7 +253,10 @@ impl Records {
                 positions: self.positions.values(),
                 cov: self.covariance.values(),
                 colors: self.colors.values(),
-                opacity: self.opacity.as_ref().map(|a| a.values::<1>().into_iter().map(|[o]| o).collect()),
+                opacity: self
+                    .opacity
+                    .as_ref()
+                    .map(|a| a.values::<1>().into_iter().map(|[o]| o).collect()),
             },
         }
     }

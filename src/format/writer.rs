@@ -21,7 +21,12 @@ pub struct WriteOptions {
 
 impl Default for WriteOptions {
     fn default() -> Self {
-        WriteOptions { zstd_level: 19, psnr: None, settings: Some(String::new()), ancillary: Vec::new() }
+        WriteOptions {
+            zstd_level: 19,
+            psnr: None,
+            settings: Some(String::new()),
+            ancillary: Vec::new(),
+        }
     }
 }
 
@@ -36,13 +41,25 @@ pub fn write_file<W: Write>(w: &mut W, records: &Records, opts: &WriteOptions) -
     }
     for a in &opts.ancillary {
         if a.ty.is_critical() || !a.ty.is_valid() || a.ty == ChunkType::COMPRESSION_META {
-            return Err(invalid(format!("{} cannot be passed as an ancillary chunk", a.ty)));
+            return Err(invalid(format!(
+                "{} cannot be passed as an ancillary chunk",
+                a.ty
+            )));
         }
     }
     let mut body: Vec<(ChunkType, Vec<u8>)> = vec![
-        (ChunkType::POSITIONS, records.positions.to_payload(opts.zstd_level)?),
-        (ChunkType::COVARIANCE, records.covariance.to_payload(opts.zstd_level)?),
-        (ChunkType::COLORS, records.colors.to_payload(opts.zstd_level)?),
+        (
+            ChunkType::POSITIONS,
+            records.positions.to_payload(opts.zstd_level)?,
+        ),
+        (
+            ChunkType::COVARIANCE,
+            records.covariance.to_payload(opts.zstd_level)?,
+        ),
+        (
+            ChunkType::COLORS,
+            records.colors.to_payload(opts.zstd_level)?,
+        ),
     ];
     if let Some(o) = &records.opacity {
         body.push((ChunkType::OPACITY, o.to_payload(opts.zstd_level)?));
@@ -53,10 +70,18 @@ pub fn write_file<W: Write>(w: &mut W, records: &Records, opts: &WriteOptions) -
     let mut total = SIGNATURE.len() as u64 + framed_len(header.len()) + framed_len(0);
     total += body.iter().map(|(_, d)| framed_len(d.len())).sum::<u64>();
     let meta = match &opts.settings {
-        Some(s) if s.len() > MAX_SETTINGS_LEN => return Err(invalid(format!("settings of {} bytes", s.len()))),
+        Some(s) if s.len() > MAX_SETTINGS_LEN => {
+            return Err(invalid(format!("settings of {} bytes", s.len())))
+        }
         Some(s) => {
             total += framed_len(CompressionMeta::payload_len(s));
-            Some(CompressionMeta::new(&records.header, records.opacity.is_some(), total, opts.psnr, s.clone()))
+            Some(CompressionMeta::new(
+                &records.header,
+                records.opacity.is_some(),
+                total,
+                opts.psnr,
+                s.clone(),
+            ))
         }
         None => None,
     };

@@ -1,0 +1,82 @@
+//! `gsi decode`: render a file to an image at any size.
+
+use crate::{io, read_gsi, Failure};
+use gsi::format::Limits;
+use std::path::{Path, PathBuf};
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// The .gsi file (`-` for standard input).
+    file: PathBuf,
+    /// Output image, PNG or JPEG by extension (`-`: PNG on standard output).
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Output width in pixels (height follows the aspect ratio unless given).
+    #[arg(long, conflicts_with = "scale")]
+    width: Option<u32>,
+    /// Output height in pixels (width follows the aspect ratio unless given).
+    #[arg(long, conflicts_with = "scale")]
+    height: Option<u32>,
+    /// Scale factor applied to the stored size, e.g. 2 or 0.5.
+    #[arg(long)]
+    scale: Option<f64>,
+}
+
+/// Output size from the stored size and the requested width/height/scale.
+fn output_size(w: u32, h: u32, args: &Args) -> Result<(u32, u32), Failure> {
+    let fit = |x: f64| -> Result<u32, Failure> {
+        if x.is_finite() && x >= 0.5 && x < f64::from(u32::MAX) {
+            Ok(x.round() as u32)
+        } else {
+            Err(Failure(format!("output size {x} is out of range")))
+        }
+    };
+    let (wf, hf) = (f64::from(w), f64::from(h));
+    match (args.width, args.height, args.scale) {
+        (_, _, Some(s)) if !(s.is_finite() && s > 0.0) => {
+            Err(Failure(format!("scale {s} must be positive")))
+        }
+        (_, _, Some(s)) => Ok((fit(wf * s)?, fit(hf * s)?)),
+        (Some(ow), Some(oh), None) => Ok((ow, oh)),
+        (Some(ow), None, None) => Ok((ow, fit(f64::from(ow) * hf / wf)?.max(1))),
+        (None, Some(oh), None) => Ok((fit(f64::from(oh) * wf / hf)?.max(1), oh)),
+        (None, None, None) => Ok((w, h)),
+    }
+}
+
+pub fn run(args: Args) -> Result<(), Failure> {
+    let f = read_gsi(&args.file)?;
+    let h = &f.records.header;
+    let (w, ht) = output_size(h.width, h.height, &args)?;
+    Limits::default().check_output(w, ht)?;
+    let image = gsi::render::render(&f.records.to_scene(), w, ht)?;
+    let bytes = encode_image(&image.to_rgb8(), w, ht, &args.output)?;
+    io::write_output(&args.output, &bytes)
+        .map_err(|e| Failure(format!("{}: {e}", args.output.display())))
+}
+
+/// PNG unless the output path ends in .jpg/.jpeg.
+fn encode_image(rgb: &[u8], w: u32, h: u32, path: &Path) -> Result<Vec<u8>, Failure> {
+    use image::ImageEncoder;
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    let mut out = Vec::new();
+    match ext.as_deref() {
+        Some("jpg" | "jpeg") => image::codecs::jpeg::JpegEncoder::new_with_quality(&mut out, 95)
+            .write_image(rgb, w, h, image::ExtendedColorType::Rgb8)?,
+        None | Some("png") => image::codecs::png::PngEncoder::new(&mut out).write_image(
+            rgb,
+            w,
+            h,
+            image::ExtendedColorType::Rgb8,
+        )?,
+        Some(other) => {
+            return Err(Failure(format!(
+                "unsupported output format .{other} (use .png or .jpg)"
+            )))
+        }
+    }
+    Ok(out)
+}

@@ -1,0 +1,123 @@
+//! `gsi info`: what a file holds and how compact it is.
+
+use crate::{read_gsi, Failure};
+use gsi::format::{CompressionMeta, GsiFile};
+use serde_json::json;
+use std::path::PathBuf;
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// The .gsi file (`-` for standard input).
+    file: PathBuf,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+pub fn run(args: Args) -> Result<(), Failure> {
+    let f = read_gsi(&args.file)?;
+    let out = if args.json {
+        serde_json::to_string_pretty(&to_json(&f))?
+    } else {
+        to_text(&f)
+    };
+    println!("{out}");
+    Ok(())
+}
+
+/// Ratios measured on the file as read (the stored `gCRM` may describe an older write).
+fn measured(f: &GsiFile) -> CompressionMeta {
+    let r = &f.records;
+    CompressionMeta::new(
+        &r.header,
+        r.opacity.is_some(),
+        f.file_bytes,
+        None,
+        String::new(),
+    )
+}
+
+fn finite_or_null(x: f32) -> serde_json::Value {
+    if x.is_finite() {
+        json!(x)
+    } else {
+        serde_json::Value::Null
+    }
+}
+
+fn to_json(f: &GsiFile) -> serde_json::Value {
+    let h = &f.records.header;
+    let m = measured(f);
+    let quantizers = |a: &gsi::format::Attribute| {
+        a.quantizers
+            .iter()
+            .map(|q| json!({"bits": q.bits, "min": q.min, "max": q.max}))
+            .collect::<Vec<_>>()
+    };
+    let r = &f.records;
+    json!({
+        "version": format!("{}.{}", h.version_major, h.version_minor),
+        "width": h.width,
+        "height": h.height,
+        "gaussians": h.count,
+        "blend": h.blend.name(),
+        "cov_param": h.cov_param.name(),
+        "color_space": "srgb",
+        "opacity": r.opacity.is_some(),
+        "importance_ordered": h.flags & gsi::format::FLAG_IMPORTANCE_ORDERED != 0,
+        "file_bytes": f.file_bytes,
+        "bpp": finite_or_null(m.bpp),
+        "dof_per_gaussian": m.dof_per_gaussian,
+        "cr_dof": finite_or_null(m.cr_dof),
+        "cr_bytes": finite_or_null(m.cr_bytes),
+        "psnr": f.metadata.as_ref().and_then(|s| s.psnr).map(finite_or_null),
+        "encoder_settings": f.metadata.as_ref().map(|s| s.settings.clone()),
+        "quantizers": {
+            "GPOS": quantizers(&r.positions),
+            "GCOV": quantizers(&r.covariance),
+            "GCOL": quantizers(&r.colors),
+            "GOPA": r.opacity.as_ref().map(quantizers),
+        },
+        "chunks": f.chunks.iter().map(|c| json!({
+            "type": c.ty.to_string(),
+            "offset": c.offset,
+            "length": c.length,
+            "crc32": format!("{:08x}", c.crc32),
+        })).collect::<Vec<_>>(),
+    })
+}
+
+fn to_text(f: &GsiFile) -> String {
+    let h = &f.records.header;
+    let m = measured(f);
+    let mut s = format!(
+        "{}x{} pixels, {} Gaussians, {} blending, {} covariance{}\n\
+         {} bytes: {:.3} bpp, Cr {:.1}x by parameters (Eq. 10, {} per Gaussian), {:.1}x by bytes\n",
+        h.width,
+        h.height,
+        h.count,
+        h.blend.name(),
+        h.cov_param.name(),
+        if f.records.opacity.is_some() {
+            ", opacity"
+        } else {
+            ""
+        },
+        f.file_bytes,
+        m.bpp,
+        m.cr_dof,
+        m.dof_per_gaussian,
+        m.cr_bytes,
+    );
+    if let Some(p) = f.metadata.as_ref().and_then(|s| s.psnr) {
+        s += &format!("stored result: {p:.2} dB PSNR against the encoder's input\n");
+    }
+    s += "chunks:";
+    for c in &f.chunks {
+        s += &format!(
+            "\n  {} at byte {:>8}, {:>8} bytes, crc {:08x}",
+            c.ty, c.offset, c.length, c.crc32
+        );
+    }
+    s
+}

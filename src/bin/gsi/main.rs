@@ -1,0 +1,59 @@
+//! `gsi`: the command-line front end. Exit status: 0 success, 1 invalid input or a
+//! failed operation (one line on stderr naming the problem), 2 usage error.
+
+mod decode;
+mod info;
+mod io;
+
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+
+#[derive(Parser)]
+#[command(
+    name = "gsi",
+    version,
+    about = "Images stored as 2D Gaussians: inspect and decode .gsi files"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Describe a .gsi file: size, Gaussians, compression figures, chunks.
+    Info(info::Args),
+    /// Render a .gsi file to PNG or JPEG at any size.
+    Decode(decode::Args),
+}
+
+/// An error already phrased for the user.
+pub struct Failure(pub String);
+
+impl<E: std::fmt::Display> From<E> for Failure {
+    fn from(e: E) -> Self {
+        Failure(e.to_string())
+    }
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Info(a) => info::run(a),
+        Command::Decode(a) => decode::run(a),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(Failure(msg)) => {
+            eprintln!("gsi: {msg}");
+            ExitCode::from(1)
+        }
+    }
+}
+
+/// Read and validate a whole file, naming the path in any error.
+pub fn read_gsi(path: &std::path::Path) -> Result<gsi::format::GsiFile, Failure> {
+    let input = io::open_input(path).map_err(|e| Failure(format!("{}: {e}", path.display())))?;
+    gsi::format::read_file(input, gsi::format::Limits::default())
+        .map_err(|e| Failure(format!("{}: {e}", path.display())))
+}

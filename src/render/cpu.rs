@@ -1,0 +1,330 @@
+//! The tiled CPU rasterizer.
+//!
+//! Work is split into bands of [`TILE`] pixel rows. Each band owns a contiguous slice of
+//! the output, so bands can be rendered on different threads without sharing or
+//! `unsafe`. Inside a band, Gaussians are binned per 16×16 tile; a tile visits its list
+//! in stored order and evaluates only the pixels inside both the tile and the
+//! Gaussian's box. Which thread renders a band never changes the arithmetic, so the
+//! parallel and sequential builds give identical bits.
+
+use super::project::Projected;
+use super::tiles::{runs, Bins, Span};
+use super::{ALPHA_MAX, ALPHA_MIN, TILE, TRANSMITTANCE_MIN};
+use crate::model::Blend;
+
+/// Most entries of the per-band lists binned at once (64 MiB of indices).
+const BAND_BUDGET: u64 = 1 << 24;
+/// Most entries of one band's per-tile lists binned at once, per thread (4 MiB).
+const TILE_BUDGET: u64 = 1 << 20;
+/// Tile area in pixels.
+const TILE_PIXELS: usize = (TILE * TILE) as usize;
+
+/// Render projected Gaussians (in stored order) into `out`, `width * height * 3` floats.
+pub(crate) fn render_projected(
+    proj: &[Projected],
+    blend: Blend,
+    width: u32,
+    height: u32,
+    out: &mut [f32],
+    parallel: bool,
+) {
+    let budgets = (BAND_BUDGET, TILE_BUDGET);
+    render_budgeted(proj, blend, width, height, out, parallel, budgets);
+}
+
+/// [`render_projected`] with explicit binning budgets `(bands, tiles)`, so that tests can
+/// force many small runs.
+fn render_budgeted(
+    proj: &[Projected],
+    blend: Blend,
+    width: u32,
+    height: u32,
+    out: &mut [f32],
+    parallel: bool,
+    (band_budget, tile_budget): (u64, u64),
+) {
+    debug_assert_eq!(out.len(), width as usize * height as usize * 3);
+    let row_len = width as usize * 3;
+    let band_len = TILE.min(height) as usize * row_len;
+    let band_count = height.div_ceil(TILE);
+    let spans = proj
+        .iter()
+        .enumerate()
+        .map(|(k, p)| (k as u32, p.bbox.y0 / TILE, p.bbox.y1 / TILE));
+
+    let mut bands = Bins::default();
+    for run in runs(spans.clone(), band_count, band_budget) {
+        bands.fill(spans.clone(), run.clone());
+        let start = run.start as usize * band_len;
+        let end = (run.end as usize * band_len).min(out.len());
+        let rows = &mut out[start..end];
+        let job = |scratch: &mut Scratch, (k, rows): (usize, &mut [f32])| {
+            let band = run.start + k as u32;
+            let ctx = Band {
+                proj,
+                blend,
+                width,
+                y0: band * TILE,
+                tile_budget,
+            };
+            ctx.render(bands.slot(band), rows, scratch);
+        };
+        #[cfg(feature = "parallel")]
+        if parallel {
+            use rayon::prelude::*;
+            rows.par_chunks_mut(band_len)
+                .enumerate()
+                .for_each_init(Scratch::default, job);
+            continue;
+        }
+        let _ = parallel;
+        let mut scratch = Scratch::default();
+        rows.chunks_mut(band_len)
+            .enumerate()
+            .for_each(|item| job(&mut scratch, item));
+    }
+}
+
+/// Per-thread buffers, reused from band to band.
+#[derive(Default)]
+struct Scratch {
+    tiles: Bins,
+}
+
+/// What every tile of one band needs to know.
+struct Band<'a> {
+    proj: &'a [Projected],
+    blend: Blend,
+    width: u32,
+    /// First pixel row of the band.
+    y0: u32,
+    tile_budget: u64,
+}
+
+/// A tile's pixels: columns `x0..x1`, rows `y0..y1` (exclusive ends).
+#[derive(Clone, Copy)]
+struct Rect {
+    x0: u32,
+    x1: u32,
+    y0: u32,
+    y1: u32,
+}
+
+impl Band<'_> {
+    /// Render the Gaussians of `list` (indices into `proj`, stored order) into `rows`,
+    /// the band's pixel rows.
+    fn render(&self, list: &[u32], rows: &mut [f32], scratch: &mut Scratch) {
+        rows.fill(0.0);
+        if list.is_empty() {
+            return;
+        }
+        let row_len = self.width as usize * 3;
+        let y1 = self.y0 + (rows.len() / row_len) as u32;
+        let tiles_x = self.width.div_ceil(TILE);
+        let spans = list.iter().map(|&k| -> Span {
+            let b = &self.proj[k as usize].bbox;
+            (k, b.x0 / TILE, b.x1 / TILE)
+        });
+        for run in runs(spans.clone(), tiles_x, self.tile_budget) {
+            scratch.tiles.fill(spans.clone(), run.clone());
+            for tx in run {
+                let tile = scratch.tiles.slot(tx);
+                if tile.is_empty() {
+                    continue;
+                }
+                let x0 = tx * TILE;
+                let rect = Rect {
+                    x0,
+                    x1: (x0 + TILE).min(self.width),
+                    y0: self.y0,
+                    y1,
+                };
+                match self.blend {
+                    Blend::Sum => self.tile_sum(tile, rect, rows),
+                    Blend::Alpha => self.tile_alpha(tile, rect, rows),
+                }
+            }
+        }
+    }
+
+    /// `sum` blending: `acc += c · alpha` for every Gaussian of the tile, in list order.
+    fn tile_sum(&self, list: &[u32], rect: Rect, rows: &mut [f32]) {
+        let row_len = self.width as usize * 3;
+        for &k in list {
+            let g = &self.proj[k as usize];
+            let Some((xs, ys)) = clip(g, rect) else {
+                continue;
+            };
+            let [ca, cb, cc] = g.conic;
+            let [mx, my] = g.mean;
+            let (o, col) = (g.opacity, g.color);
+            let cut = cutoff(o);
+            for j in ys {
+                let dy = (j as f32 + 0.5) - my;
+                let cdy = cc * dy * dy;
+                let base = (j - self.y0) as usize * row_len;
+                let row = &mut rows[base + xs.start as usize * 3..base + xs.end as usize * 3];
+                for (px, i) in row.chunks_exact_mut(3).zip(xs.clone()) {
+                    let dx = (i as f32 + 0.5) - mx;
+                    let power = -0.5 * (ca * dx * dx + cdy) - cb * dx * dy;
+                    // `power > 0` is skipped by the contract; below `cut`, alpha is
+                    // certainly under ALPHA_MIN, so the exponential can be spared.
+                    if !(cut..=0.0).contains(&power) {
+                        continue;
+                    }
+                    let alpha = o * power.exp();
+                    if alpha < ALPHA_MIN {
+                        continue;
+                    }
+                    px[0] += col[0] * alpha;
+                    px[1] += col[1] * alpha;
+                    px[2] += col[2] * alpha;
+                }
+            }
+        }
+    }
+
+    /// `alpha` blending: front to back in list order, with per-pixel transmittance.
+    fn tile_alpha(&self, list: &[u32], rect: Rect, rows: &mut [f32]) {
+        let row_len = self.width as usize * 3;
+        let mut trans = [1.0f32; TILE_PIXELS];
+        // Pixels of the tile still taking light; the tile is done when none is.
+        let mut live = ((rect.x1 - rect.x0) * (rect.y1 - rect.y0)) as usize;
+        for &k in list {
+            let g = &self.proj[k as usize];
+            let Some((xs, ys)) = clip(g, rect) else {
+                continue;
+            };
+            let [ca, cb, cc] = g.conic;
+            let [mx, my] = g.mean;
+            let (o, col) = (g.opacity, g.color);
+            let cut = cutoff(o);
+            for j in ys {
+                let dy = (j as f32 + 0.5) - my;
+                let cdy = cc * dy * dy;
+                let base = (j - self.y0) as usize * row_len;
+                let row = &mut rows[base + xs.start as usize * 3..base + xs.end as usize * 3];
+                let t0 = (j - rect.y0) as usize * TILE as usize + (xs.start - rect.x0) as usize;
+                let trow = &mut trans[t0..t0 + xs.len()];
+                for ((px, t), i) in row.chunks_exact_mut(3).zip(trow).zip(xs.clone()) {
+                    if *t < TRANSMITTANCE_MIN {
+                        continue;
+                    }
+                    let dx = (i as f32 + 0.5) - mx;
+                    let power = -0.5 * (ca * dx * dx + cdy) - cb * dx * dy;
+                    if !(cut..=0.0).contains(&power) {
+                        continue;
+                    }
+                    let alpha = (o * power.exp()).min(ALPHA_MAX);
+                    if alpha < ALPHA_MIN {
+                        continue;
+                    }
+                    px[0] += col[0] * alpha * *t;
+                    px[1] += col[1] * alpha * *t;
+                    px[2] += col[2] * alpha * *t;
+                    *t *= 1.0 - alpha;
+                    if *t < TRANSMITTANCE_MIN {
+                        live -= 1;
+                    }
+                }
+            }
+            if live == 0 {
+                break;
+            }
+        }
+    }
+}
+
+/// Columns and rows of `rect` inside the box of `g` (non-empty for a binned Gaussian).
+#[inline]
+fn clip(g: &Projected, rect: Rect) -> Option<(std::ops::Range<u32>, std::ops::Range<u32>)> {
+    let b = &g.bbox;
+    let xs = b.x0.max(rect.x0)..(b.x1 + 1).min(rect.x1);
+    let ys = b.y0.max(rect.y0)..(b.y1 + 1).min(rect.y1);
+    (!xs.is_empty() && !ys.is_empty()).then_some((xs, ys))
+}
+
+/// A `power` below which `opacity · exp(power) < ALPHA_MIN` for certain, whatever the
+/// rounding of `exp` and of the product: `ln(ALPHA_MIN / opacity)` less a margin of
+/// 1e-3, thousands of ulps of `exp`. Only a shortcut: every pixel above it is evaluated
+/// exactly as the contract says.
+#[inline]
+fn cutoff(opacity: f32) -> f32 {
+    ((f64::from(ALPHA_MIN) / f64::from(opacity)).ln() - 1e-3) as f32
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::project_scene;
+    use super::*;
+    use crate::model::CovParam;
+    use crate::synth::{random_scene, SceneSpec};
+
+    fn render_both(blend: Blend, w: u32, h: u32) -> (Vec<f32>, Vec<f32>) {
+        let mut spec = SceneSpec::new(64, 48, 400, blend);
+        spec.sigma_px = (0.3, 30.0);
+        spec.cov_param = CovParam::Cholesky;
+        let scene = random_scene(11, spec);
+        let proj = project_scene(&scene, w, h);
+        let mut seq = vec![f32::NAN; (w * h * 3) as usize];
+        let mut par = vec![f32::NAN; (w * h * 3) as usize];
+        render_projected(&proj, blend, w, h, &mut seq, false);
+        render_projected(&proj, blend, w, h, &mut par, true);
+        (seq, par)
+    }
+
+    #[test]
+    fn parallel_and_sequential_are_identical() {
+        for blend in [Blend::Sum, Blend::Alpha] {
+            for (w, h) in [(64, 48), (131, 97), (5, 200), (1, 1)] {
+                let (seq, par) = render_both(blend, w, h);
+                assert!(seq.iter().all(|x| x.is_finite()));
+                let same = seq
+                    .iter()
+                    .zip(&par)
+                    .all(|(a, b)| a.to_bits() == b.to_bits());
+                assert!(same, "{blend:?} {w}x{h}");
+            }
+        }
+    }
+
+    #[test]
+    fn cutoff_is_below_the_threshold() {
+        for o in [ALPHA_MIN, 0.01, 0.1, 0.5, 0.99, 1.0] {
+            let cut = cutoff(o);
+            // Just below the cut-off, alpha is under the threshold; at the true
+            // threshold, it is (about) on it.
+            assert!(o * cut.exp() < ALPHA_MIN, "{o}");
+            assert!(o * (cut + 2e-3).exp() >= ALPHA_MIN, "{o}");
+        }
+    }
+
+    #[test]
+    fn tiny_budgets_give_the_same_image() {
+        // Binning in runs of one band and one tile must not change what a pixel visits.
+        for blend in [Blend::Sum, Blend::Alpha] {
+            let mut spec = SceneSpec::new(40, 40, 300, blend);
+            spec.sigma_px = (0.3, 40.0);
+            let scene = random_scene(5, spec);
+            let (w, h) = (75, 50);
+            let proj = project_scene(&scene, w, h);
+            let mut a = vec![0.0; (w * h * 3) as usize];
+            let mut b = a.clone();
+            render_budgeted(
+                &proj,
+                blend,
+                w,
+                h,
+                &mut a,
+                false,
+                (BAND_BUDGET, TILE_BUDGET),
+            );
+            render_budgeted(&proj, blend, w, h, &mut b, false, (0, 0));
+            assert!(a.iter().any(|&x| x != 0.0));
+            assert!(
+                a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits()),
+                "{blend:?}"
+            );
+        }
+    }
+}
