@@ -66,7 +66,10 @@
 //! From C, the same decoder is `include/gsi.h` (feature `capi`, in the staticlib and
 //! cdylib); `examples/c/decode.c` shows its use.
 
+#[cfg(feature = "encode")]
+pub mod fit;
 pub mod format;
+pub mod metrics;
 pub mod model;
 pub mod render;
 #[doc(hidden)]

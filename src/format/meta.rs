@@ -58,7 +58,7 @@ impl CompressionMeta {
             cr_dof,
             cr_bytes,
             bpp,
-            psnr: psnr.filter(|p| p.is_finite()),
+            psnr: psnr.filter(|p| *p >= 0.0),
             settings,
         }
     }
@@ -94,10 +94,11 @@ impl CompressionMeta {
         }
         let f = |at: usize| BigEndian::read_f32(&p[at..at + 4]);
         let (cr_dof, cr_bytes, bpp, psnr) = (f(10), f(14), f(18), f(22));
-        if ![cr_dof, cr_bytes, bpp, psnr]
+        // PSNR alone may be +∞: the stored result can equal the input exactly.
+        let ratios_ok = [cr_dof, cr_bytes, bpp]
             .iter()
-            .all(|v| v.is_finite() && *v >= 0.0)
-        {
+            .all(|v| v.is_finite() && *v >= 0.0);
+        if !ratios_ok || psnr.is_nan() || psnr < 0.0 {
             return Err(invalid("gCRM holds a negative or non-finite figure"));
         }
         if !matches!(p[8], 8 | 9) {

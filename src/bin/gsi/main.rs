@@ -1,7 +1,9 @@
 //! `gsi`: the command-line front end. Exit status: 0 success, 1 invalid input or a
 //! failed operation (one line on stderr naming the problem), 2 usage error.
 
+mod compare;
 mod decode;
+mod encode;
 mod info;
 mod io;
 
@@ -12,7 +14,7 @@ use std::process::ExitCode;
 #[command(
     name = "gsi",
     version,
-    about = "Images stored as 2D Gaussians: inspect and decode .gsi files"
+    about = "Images stored as 2D Gaussians: encode, inspect and decode .gsi files"
 )]
 struct Cli {
     #[command(subcommand)]
@@ -21,10 +23,14 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Fit Gaussians to an image and write a .gsi file.
+    Encode(encode::Args),
     /// Describe a .gsi file: size, Gaussians, compression figures, chunks.
     Info(info::Args),
     /// Render a .gsi file to PNG or JPEG at any size.
     Decode(decode::Args),
+    /// Compare an image with a reference: PSNR, SSIM, MS-SSIM, GT-mean variants, LOE, DE, EME.
+    Compare(compare::Args),
 }
 
 /// An error already phrased for the user.
@@ -39,8 +45,10 @@ impl<E: std::fmt::Display> From<E> for Failure {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
+        Command::Encode(a) => encode::run(a),
         Command::Info(a) => info::run(a),
         Command::Decode(a) => decode::run(a),
+        Command::Compare(a) => compare::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,0 +1,110 @@
+//! Exact least-squares colours for fixed geometry.
+//!
+//! With positions, covariances and opacities frozen, both blend modes are linear in the
+//! colours: the image is `A c` for a sparse matrix `A` of per-pixel weights
+//! (`alpha_i` for `sum`, `alpha_i T_i` for `alpha`). The best colours in the L2 sense
+//! solve `(AᵀA + εI) c = Aᵀ y`. `A` is never formed: the forward pass applies it and the
+//! colour part of the backward pass applies `Aᵀ`, so conjugate gradients (on the normal
+//! equations) needs only renders.
+
+use super::raster::{self, Need};
+use crate::model::Blend;
+use crate::render::Projected;
+
+/// Ridge term: keeps Gaussians that touch almost nothing from taking huge colours.
+const RIDGE: f32 = 1e-3;
+
+/// Solve for the colours of `projected` (written into their `color`) that best
+/// reproduce `target` (interleaved RGB), running `iterations` CG steps from the
+/// current colours. Returns the solved colour of each projected Gaussian.
+pub fn solve_colors(
+    projected: &mut [Projected],
+    blend: Blend,
+    width: u32,
+    height: u32,
+    target: &[f32],
+    iterations: usize,
+) -> Vec<[f32; 3]> {
+    let n = projected.len();
+    let apply = |proj: &mut [Projected], c: &[[f32; 3]]| -> (raster::Forward, Vec<f32>) {
+        for (g, c) in proj.iter_mut().zip(c) {
+            g.color = *c;
+        }
+        let f = raster::forward(proj, blend, width, height);
+        let img = f.image.clone();
+        (f, img)
+    };
+    // Aᵀ r, reusing the binning of the forward pass that produced `f`.
+    let adjoint = |f: &raster::Forward, proj: &[Projected], r: &[f32]| -> Vec<[f32; 3]> {
+        raster::backward(f, proj, r, Need::ColorOnly)
+            .into_iter()
+            .map(|g| g.color)
+            .collect()
+    };
+    let mut x: Vec<[f32; 3]> = projected.iter().map(|g| g.color).collect();
+    // r = Aᵀ(y − A x) − ε x
+    let (f, ax) = apply(projected, &x);
+    let resid: Vec<f32> = target.iter().zip(&ax).map(|(y, a)| y - a).collect();
+    let mut r = adjoint(&f, projected, &resid);
+    for (ri, xi) in r.iter_mut().zip(&x) {
+        for ch in 0..3 {
+            ri[ch] -= RIDGE * xi[ch];
+        }
+    }
+    let mut p = r.clone();
+    let dot = |a: &[[f32; 3]], b: &[[f32; 3]]| -> [f64; 3] {
+        let mut s = [0f64; 3];
+        for (u, v) in a.iter().zip(b) {
+            for ch in 0..3 {
+                s[ch] += f64::from(u[ch]) * f64::from(v[ch]);
+            }
+        }
+        s
+    };
+    let mut rr = dot(&r, &r);
+    for _ in 0..iterations {
+        if rr.iter().all(|&v| v <= 1e-20) {
+            break;
+        }
+        // q = (AᵀA + ε) p, per channel.
+        let (f, ap) = apply(projected, &p);
+        let mut q = adjoint(&f, projected, &ap);
+        for (qi, pi) in q.iter_mut().zip(&p) {
+            for ch in 0..3 {
+                qi[ch] += RIDGE * pi[ch];
+            }
+        }
+        let pq = dot(&p, &q);
+        let alpha: [f32; 3] = std::array::from_fn(|ch| {
+            if pq[ch] > 0.0 {
+                (rr[ch] / pq[ch]) as f32
+            } else {
+                0.0
+            }
+        });
+        for k in 0..n {
+            for ch in 0..3 {
+                x[k][ch] += alpha[ch] * p[k][ch];
+                r[k][ch] -= alpha[ch] * q[k][ch];
+            }
+        }
+        let rr_new = dot(&r, &r);
+        let beta: [f32; 3] = std::array::from_fn(|ch| {
+            if rr[ch] > 0.0 {
+                (rr_new[ch] / rr[ch]) as f32
+            } else {
+                0.0
+            }
+        });
+        for k in 0..n {
+            for ch in 0..3 {
+                p[k][ch] = r[k][ch] + beta[ch] * p[k][ch];
+            }
+        }
+        rr = rr_new;
+    }
+    for (g, c) in projected.iter_mut().zip(&x) {
+        g.color = c.map(|v| if v.is_finite() { v } else { 0.0 });
+    }
+    x
+}

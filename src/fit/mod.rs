@@ -1,0 +1,474 @@
+//! Stage 1: fit Gaussians to an image and write the quantized file (`gsi encode`).
+//!
+//! The pipeline, each step in its own module:
+//! 1. [`init`]: place N Gaussians from the image content (or the paper's random start);
+//! 2. [`lsq`]: solve their colours exactly for the fixed geometry;
+//! 3. Adam on all parameters ([`params`]) through the differentiable rasterizer
+//!    ([`raster`]), with pruning of Gaussians that do not change the render and
+//!    error-guided re-placement;
+//! 4. quantization-aware fine-tuning: the last iterations render the *quantized*
+//!    parameters (straight-through gradients), so the stored file, not the float model,
+//!    reaches the quality;
+//! 5. quantize with bit depths fitted to each component's range, write, decode the
+//!    bytes and record the PSNR of what was stored.
+//!
+//! `--bpp` and `--target-psnr` choose N: a file over its byte budget loses its least
+//! useful Gaussians and is fine-tuned again; a file under its quality target grows.
+
+pub mod init;
+pub mod loss;
+pub mod lsq;
+pub mod params;
+pub mod raster;
+
+pub use init::Init;
+pub use loss::Loss;
+pub use params::LearningRates;
+
+use crate::format::{self, BitDepths, Error, ErrorKind, Records, WriteOptions};
+use crate::model::{Blend, CovParam, GaussianSet, Scene};
+use crate::render::{project_scene, RgbImage};
+use raster::Need;
+
+/// The image being fitted: interleaved RGB in `[0, 1]` (sRGB-encoded values).
+pub type Target = RgbImage;
+
+/// How many Gaussians to spend.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Budget {
+    Gaussians(usize),
+    /// Bits per pixel of the whole file, headers included.
+    Bpp(f32),
+    /// PSNR (dB) of the stored file; N grows until it is met.
+    TargetPsnr(f32),
+}
+
+#[derive(Clone, Debug)]
+pub struct EncodeOptions {
+    pub budget: Budget,
+    pub iterations: u32,
+    pub init: Init,
+    pub blend: Blend,
+    pub seed: u64,
+    pub loss: Loss,
+    pub lr: LearningRates,
+    /// Bit depths; `None` picks them from the image size.
+    pub bits: Option<BitDepths>,
+    /// Fraction of the iterations spent on quantization-aware fine-tuning.
+    pub qat_fraction: f32,
+    /// Prune and re-place Gaussians during fitting.
+    pub densify: bool,
+}
+
+impl Default for EncodeOptions {
+    fn default() -> Self {
+        EncodeOptions {
+            budget: Budget::Bpp(1.0),
+            iterations: 600,
+            init: Init::Adaptive,
+            blend: Blend::Sum,
+            seed: 0,
+            loss: Loss::L1MsSsim { lambda: 0.2 },
+            lr: LearningRates {
+                position: 2e-4,
+                log_scale: 0.01,
+                rotation: 0.01,
+                color: 0.005,
+                opacity: 0.01,
+            },
+            bits: None,
+            qat_fraction: 0.2,
+            densify: true,
+        }
+    }
+}
+
+/// A progress report, every few iterations.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Progress {
+    pub iteration: u32,
+    pub total: u32,
+    pub gaussians: usize,
+    pub loss: f32,
+    /// PSNR (dB, 8-bit) of the current render; of the quantized one during fine-tuning.
+    pub psnr: f64,
+    pub seconds: f64,
+}
+
+/// The result of an encode.
+pub struct Encoded {
+    pub records: Records,
+    pub bytes: Vec<u8>,
+    /// PSNR (dB, 8-bit RGB) of the decoded file against the target.
+    pub psnr: f64,
+    pub curve: Vec<Progress>,
+}
+
+/// Bit depths for an image: positions to 1/8 pixel of the longer side.
+pub fn default_bits(width: u32, height: u32, blend: Blend) -> BitDepths {
+    let side = width.max(height).max(2);
+    let position = (32 - (side - 1).leading_zeros() + 3).clamp(6, 20) as u8;
+    BitDepths {
+        position,
+        covariance: 8,
+        color: if blend == Blend::Sum { 8 } else { 7 },
+        opacity: 6,
+    }
+}
+
+/// Estimated stored bytes per Gaussian (before zstd, which gains little on packed codes).
+fn bytes_per_gaussian(bits: BitDepths, blend: Blend) -> f32 {
+    let b =
+        2 * u32::from(bits.position) + 3 * u32::from(bits.covariance) + 3 * u32::from(bits.color);
+    let b = b + if blend == Blend::Alpha {
+        u32::from(bits.opacity)
+    } else {
+        0
+    };
+    b as f32 / 8.0
+}
+
+/// Fixed bytes of a file: signature, header, gCRM, chunk frames and quantizer preambles.
+const FILE_OVERHEAD: f32 = 300.0;
+
+/// The fitting state: parameters, optimizer, target.
+pub struct Fitter<'a> {
+    target: &'a Target,
+    blend: Blend,
+    pub params: GaussianSet,
+    adam: params::Adam,
+    loss: loss::LossFn,
+    seed: u64,
+}
+
+impl<'a> Fitter<'a> {
+    pub fn new(
+        target: &'a Target,
+        n: usize,
+        init: Init,
+        blend: Blend,
+        loss: Loss,
+        seed: u64,
+    ) -> Fitter<'a> {
+        let params = init::initialize(target, n, init, blend, seed);
+        let adam = params::Adam::new(&params);
+        let mut f = Fitter {
+            target,
+            blend,
+            params,
+            adam,
+            loss: loss::LossFn::new(loss),
+            seed,
+        };
+        if init == Init::Adaptive {
+            f.solve_colors(20);
+        }
+        f
+    }
+
+    fn scene_of(&self, g: GaussianSet) -> Scene {
+        Scene {
+            width: self.target.width,
+            height: self.target.height,
+            blend: self.blend,
+            cov_param: CovParam::LogScaleRotation,
+            gaussians: g,
+        }
+    }
+
+    pub fn scene(&self) -> Scene {
+        self.scene_of(self.params.clone())
+    }
+
+    /// Parameters as they will be after quantization with `bits`.
+    fn quantized(&self, bits: BitDepths) -> GaussianSet {
+        Records::from_scene(&self.scene(), bits)
+            .to_scene()
+            .gaussians
+    }
+
+    /// Replace the colours by their least-squares optimum for the current geometry.
+    pub fn solve_colors(&mut self, iterations: usize) {
+        let (w, h) = (self.target.width, self.target.height);
+        let scene = self.scene();
+        let mut projected = project_scene(&scene, w, h);
+        let colors = lsq::solve_colors(
+            &mut projected,
+            self.blend,
+            w,
+            h,
+            &self.target.data,
+            iterations,
+        );
+        for (g, c) in projected.iter().zip(colors) {
+            self.params.colors[g.index] = c.map(|v| v.clamp(-4.0, 4.0));
+        }
+    }
+
+    /// One optimizer step. With `qat`, the forward pass renders the quantized parameters
+    /// and their gradient is applied to the float ones (straight-through).
+    pub fn step(&mut self, lr: &LearningRates, qat: Option<BitDepths>) -> (f32, f64) {
+        let (w, h) = (self.target.width, self.target.height);
+        let used = match qat {
+            Some(bits) => self.quantized(bits),
+            None => self.params.clone(),
+        };
+        let scene = self.scene_of(used);
+        let projected = project_scene(&scene, w, h);
+        let fwd = raster::forward(&projected, self.blend, w, h);
+        let (value, dl) = self.loss.eval(&fwd.image, &self.target.data, w, h);
+        let psnr = loss::psnr8(&fwd.image, &self.target.data, w, h);
+        let pg = raster::backward(&fwd, &projected, &dl, Need::All);
+        let mut grads = params::zero_grads(&self.params);
+        params::chain(&scene.gaussians, &projected, &pg, w, h, &mut grads);
+        self.adam.step(&mut self.params, &grads, lr);
+        (value, psnr)
+    }
+
+    /// Total colour each Gaussian puts into the image, `Σ_p alpha_i T_i · max|c_i|`
+    /// (0 for Gaussians that touch no pixel), and the current render.
+    fn contributions(&self) -> (Vec<f32>, Vec<f32>) {
+        let (w, h) = (self.target.width, self.target.height);
+        let scene = self.scene();
+        let projected = project_scene(&scene, w, h);
+        let fwd = raster::forward(&projected, self.blend, w, h);
+        let ones = vec![1f32; fwd.image.len()];
+        let pg = raster::backward(&fwd, &projected, &ones, Need::ColorOnly);
+        let mut score = vec![0f32; self.params.len()];
+        for (g, d) in projected.iter().zip(&pg) {
+            let cmax = g.color.iter().fold(0f32, |m, c| m.max(c.abs()));
+            score[g.index] = d.color[0] * cmax.max(1.0 / 255.0);
+        }
+        (score, fwd.image)
+    }
+
+    /// Drop Gaussians whose total contribution is below `min_score`, keeping at most
+    /// `keep_at_most` (the most useful), then add Gaussians where the error is largest
+    /// until there are `n`. Returns how many were removed.
+    pub fn prune_and_grow(&mut self, min_score: f32, keep_at_most: usize, n: usize) -> usize {
+        let (score, image) = self.contributions();
+        let mut order: Vec<usize> = (0..score.len()).collect();
+        order.sort_by(|&a, &b| score[b].total_cmp(&score[a]).then(a.cmp(&b)));
+        let mut keep = vec![false; score.len()];
+        for &i in order.iter().take(keep_at_most) {
+            keep[i] = score[i] >= min_score;
+        }
+        let removed = keep.iter().filter(|k| !**k).count();
+        params::retain(&mut self.params, &keep);
+        let grow = n.saturating_sub(self.params.len());
+        self.adam.resize(&keep, 0);
+        if grow > 0 {
+            let added = self.add_at_error(&image, grow);
+            self.adam
+                .resize(&vec![true; self.params.len() - added], added);
+        }
+        removed
+    }
+
+    /// Append up to `k` small Gaussians at pixels sampled in proportion to the squared
+    /// error; none where the render is already exact. Returns how many were added.
+    fn add_at_error(&mut self, image: &[f32], k: usize) -> usize {
+        let t = self.target;
+        let (w, h) = (t.width as usize, t.height as usize);
+        let err: Vec<f32> = image
+            .chunks_exact(3)
+            .zip(t.data.chunks_exact(3))
+            .map(|(a, b)| (0..3).map(|c| (a[c] - b[c]).powi(2)).sum())
+            .collect();
+        let mut rng = crate::synth::SplitMix64::new(self.seed ^ self.params.len() as u64);
+        let picks = init::stratified(&err, w, h, k, &mut rng);
+        let n_all = (self.params.len() + k) as f32;
+        let sigma = (0.35 * ((w * h) as f32 / n_all).sqrt()).max(0.5);
+        let (fw, fh) = (w as f32, h as f32);
+        for &p in &picks {
+            let (x, y) = ((p % w) as f32 + rng.unit(), (p / w) as f32 + rng.unit());
+            self.params.positions.push([x / fw, y / fh]);
+            self.params
+                .cov
+                .push(init::pixel_lsr(sigma, sigma, 0.0, fw, fh));
+            let c: [f32; 3] = std::array::from_fn(|ch| {
+                t.data[p * 3 + ch]
+                    - if self.blend == Blend::Sum {
+                        image[p * 3 + ch]
+                    } else {
+                        0.0
+                    }
+            });
+            self.params.colors.push(c);
+            if let Some(o) = self.params.opacity.as_mut() {
+                o.push(0.5);
+            }
+        }
+        picks.len()
+    }
+}
+/// Learning-rate factor at `it` of `total`: cosine decay to 5 %.
+fn schedule(it: u32, total: u32) -> f32 {
+    let t = it as f32 / total.max(1) as f32;
+    0.05 + 0.95 * 0.5 * (1.0 + (std::f32::consts::PI * t).cos())
+}
+
+/// Fit `target` and write the file.
+pub fn encode(
+    target: &Target,
+    opts: &EncodeOptions,
+    on_progress: &mut dyn FnMut(&Progress),
+) -> Result<Encoded, Error> {
+    check_target(target)?;
+    let (w, h) = (target.width, target.height);
+    let px = (w as f32) * (h as f32);
+    let bits = opts.bits.unwrap_or_else(|| default_bits(w, h, opts.blend));
+    let per_g = bytes_per_gaussian(bits, opts.blend);
+    let max_n = ((px / 2.0) as usize).clamp(1, 1 << 22);
+    let mut n = match opts.budget {
+        Budget::Gaussians(n) => n.clamp(1, 1 << 22),
+        Budget::Bpp(b) => (((b * px / 8.0 - FILE_OVERHEAD) / per_g) as usize).clamp(1, max_n),
+        Budget::TargetPsnr(_) => ((px / 400.0) as usize).clamp(4.min(max_n), max_n),
+    };
+    let start = std::time::Instant::now();
+    let mut fitter = Fitter::new(target, n, opts.init, opts.blend, opts.loss, opts.seed);
+    let mut curve = Vec::new();
+    let mut report =
+        |it: u32, total: u32, n: usize, loss: f32, psnr: f64, curve: &mut Vec<Progress>| {
+            let p = Progress {
+                iteration: it,
+                total,
+                gaussians: n,
+                loss,
+                psnr,
+                seconds: start.elapsed().as_secs_f64(),
+            };
+            on_progress(&p);
+            curve.push(p);
+        };
+    let mut run =
+        |fitter: &mut Fitter, total: u32, curve: &mut Vec<Progress>, stop_at: Option<f64>| {
+            let qat_from = ((1.0 - opts.qat_fraction) * total as f32) as u32;
+            let densify_at = [total / 4, total / 2];
+            for it in 0..total {
+                if opts.densify && densify_at.contains(&it) && it > 0 {
+                    let n_now = fitter.params.len();
+                    fitter.prune_and_grow(0.5, n_now, n_now);
+                    if opts.blend == Blend::Sum || opts.init == Init::Adaptive {
+                        fitter.solve_colors(10);
+                    }
+                }
+                let qat = (it >= qat_from).then_some(bits);
+                let (loss, psnr) = fitter.step(&opts.lr.scaled(schedule(it, total)), qat);
+                if it % 10 == 0 || it + 1 == total {
+                    report(it + 1, total, fitter.params.len(), loss, psnr, curve);
+                    if stop_at.is_some_and(|p| qat.is_some() && psnr >= p) {
+                        break;
+                    }
+                }
+            }
+        };
+    let stop_at = match opts.budget {
+        Budget::TargetPsnr(p) => Some(f64::from(p)),
+        _ => None,
+    };
+    run(&mut fitter, opts.iterations, &mut curve, stop_at);
+    let mut result = finish(&fitter, bits, opts)?;
+    // Budgets: shrink to the byte budget, or grow to the quality target.
+    for _ in 0..4 {
+        match opts.budget {
+            Budget::Bpp(b) => {
+                let bpp = result.bytes.len() as f32 * 8.0 / px;
+                if bpp <= b {
+                    break;
+                }
+                let shrink = (b - FILE_OVERHEAD * 8.0 / px) / (bpp - FILE_OVERHEAD * 8.0 / px);
+                n = ((fitter.params.len() as f32 * shrink * 0.98) as usize).max(1);
+                fitter.prune_and_grow(0.0, n, 0);
+            }
+            Budget::TargetPsnr(p) => {
+                if result.psnr >= f64::from(p) || fitter.params.len() >= max_n {
+                    break;
+                }
+                n = (fitter.params.len() * 8 / 5).min(max_n);
+                fitter.prune_and_grow(0.0, usize::MAX, n);
+                fitter.solve_colors(10);
+            }
+            Budget::Gaussians(_) => break,
+        }
+        run(
+            &mut fitter,
+            (opts.iterations / 3).max(1),
+            &mut curve,
+            stop_at,
+        );
+        result = finish(&fitter, bits, opts)?;
+    }
+    result.curve = curve;
+    Ok(result)
+}
+
+/// Quantize, drop what the 8-bit render cannot show, write, and measure the stored PSNR.
+fn finish(fitter: &Fitter, bits: BitDepths, opts: &EncodeOptions) -> Result<Encoded, Error> {
+    let t = fitter.target;
+    let mut scene = fitter.scene();
+    // A Gaussian whose whole contribution is under one 8-bit step changes nothing visible.
+    let (score, _) = fitter.contributions();
+    let keep: Vec<bool> = score.iter().map(|&s| s >= 1.0 / 255.0).collect();
+    params::retain(&mut scene.gaussians, &keep);
+    let records = Records::from_scene(&scene, bits);
+    let decoded = crate::render::render(&records.to_scene(), t.width, t.height)?;
+    if !decoded.data.iter().all(|v| v.is_finite()) {
+        return Err(Error::new(
+            ErrorKind::InvalidValue,
+            "the fitted Gaussians render to non-finite values",
+        ));
+    }
+    let psnr = loss::psnr8(&decoded.data, &t.data, t.width, t.height);
+    let settings = format!(
+        "encoder=gsi {}\ninit={:?}\niterations={}\nseed={}\nbudget={:?}\nloss={:?}\nbits={}/{}/{}/{}",
+        env!("CARGO_PKG_VERSION"),
+        opts.init,
+        opts.iterations,
+        opts.seed,
+        opts.budget,
+        opts.loss,
+        bits.position,
+        bits.covariance,
+        bits.color,
+        bits.opacity
+    );
+    let bytes = format::to_bytes(
+        &records,
+        &WriteOptions {
+            psnr: Some(psnr as f32),
+            settings: Some(settings),
+            ..WriteOptions::default()
+        },
+    )?;
+    Ok(Encoded {
+        records,
+        bytes,
+        psnr,
+        curve: Vec::new(),
+    })
+}
+
+/// Refuse targets that cannot be fitted: empty, mis-sized, or holding non-finite values.
+fn check_target(t: &Target) -> Result<(), Error> {
+    if t.width == 0 || t.height == 0 || t.data.len() != t.width as usize * t.height as usize * 3 {
+        return Err(Error::new(
+            ErrorKind::InvalidValue,
+            format!(
+                "target of {}x{} with {} values",
+                t.width,
+                t.height,
+                t.data.len()
+            ),
+        ));
+    }
+    if !t.data.iter().all(|v| v.is_finite()) {
+        return Err(Error::new(
+            ErrorKind::InvalidValue,
+            "target holds non-finite values",
+        ));
+    }
+    Ok(())
+}
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,177 @@
+//! Gradient checks and forward equivalence for the differentiable rasterizer.
+
+use super::params::{chain, zero_grads};
+use super::raster::{backward, forward, Need};
+use crate::model::{Blend, CovParam, GaussianSet, Scene};
+use crate::render::{project_scene, render};
+use crate::synth::{random_scene, SceneSpec, SplitMix64};
+
+#[test]
+fn forward_equals_the_decoder_bit_for_bit() {
+    for (seed, blend) in [(1, Blend::Sum), (2, Blend::Alpha), (3, Blend::Alpha)] {
+        let scene = random_scene(
+            seed,
+            SceneSpec {
+                sigma_px: (0.3, 12.0),
+                ..SceneSpec::new(70, 45, 400, blend)
+            },
+        );
+        for (w, h) in [(70, 45), (33, 17), (140, 90), (1, 1)] {
+            let fwd = forward(&project_scene(&scene, w, h), blend, w, h);
+            let want = render(&scene, w, h).unwrap();
+            assert!(fwd.image == want.data, "{blend:?} {w}x{h}");
+        }
+    }
+}
+
+/// A scene on which the loss is smooth: every Gaussian covers every pixel with
+/// `alpha` well above the cut-off and below the `alpha` cap, so finite differences do
+/// not cross a threshold.
+fn smooth_scene(blend: Blend, seed: u64) -> Scene {
+    let mut rng = SplitMix64::new(seed);
+    let (w, h) = (12u32, 10u32);
+    let mut g = GaussianSet::default();
+    for _ in 0..5 {
+        g.positions.push([rng.range(0.3, 0.7), rng.range(0.3, 0.7)]);
+        let (s1, s2) = (rng.range(7.0, 10.0), rng.range(6.0, 9.0));
+        g.cov.push([
+            (s1 / w as f32).ln(),
+            (s2 / h as f32).ln(),
+            rng.range(-1.0, 1.0),
+        ]);
+        g.colors.push([
+            rng.range(-1.0, 1.0),
+            rng.range(0.0, 1.0),
+            rng.range(0.0, 2.0),
+        ]);
+    }
+    if blend == Blend::Alpha {
+        g.opacity = Some((0..5).map(|_| rng.range(0.2, 0.55)).collect());
+    }
+    Scene {
+        width: w,
+        height: h,
+        blend,
+        cov_param: CovParam::LogScaleRotation,
+        gaussians: g,
+    }
+}
+
+/// A named scalar of the parameters, its analytic gradient, and where to find it.
+type Probe = (String, f32, Box<dyn Fn(&mut GaussianSet) -> &mut f32>);
+
+/// `L = Σ_p weight_p · image_p`, accumulated in f64, rendered by the decoder.
+fn loss(scene: &Scene, weights: &[f32]) -> f64 {
+    let img = render(scene, scene.width, scene.height).unwrap();
+    img.data
+        .iter()
+        .zip(weights)
+        .map(|(a, b)| f64::from(*a) * f64::from(*b))
+        .sum()
+}
+
+fn analytic(scene: &Scene, weights: &[f32]) -> GaussianSet {
+    let (w, h) = (scene.width, scene.height);
+    let projected = project_scene(scene, w, h);
+    assert_eq!(projected.len(), scene.gaussians.len());
+    let fwd = forward(&projected, scene.blend, w, h);
+    let pg = backward(&fwd, &projected, weights, Need::All);
+    let mut grads = zero_grads(&scene.gaussians);
+    chain(&scene.gaussians, &projected, &pg, w, h, &mut grads);
+    grads
+}
+
+#[test]
+fn every_gradient_matches_finite_differences() {
+    for (blend, seed) in [
+        (Blend::Sum, 1),
+        (Blend::Sum, 2),
+        (Blend::Alpha, 3),
+        (Blend::Alpha, 4),
+    ] {
+        let scene = smooth_scene(blend, seed);
+        let mut rng = SplitMix64::new(seed + 100);
+        let weights: Vec<f32> = (0..scene.width * scene.height * 3)
+            .map(|_| rng.range(-1.0, 1.0))
+            .collect();
+        let grads = analytic(&scene, &weights);
+        let n = scene.gaussians.len();
+        let mut checked = 0;
+        // (name, getter of a mutable parameter, step)
+        for i in 0..n {
+            let mut probes: Vec<Probe> = Vec::new();
+            for k in 0..2 {
+                probes.push((
+                    format!("pos[{i}][{k}]"),
+                    grads.positions[i][k],
+                    Box::new(move |g| &mut g.positions[i][k]),
+                ));
+            }
+            for k in 0..3 {
+                probes.push((
+                    format!("cov[{i}][{k}]"),
+                    grads.cov[i][k],
+                    Box::new(move |g| &mut g.cov[i][k]),
+                ));
+                probes.push((
+                    format!("color[{i}][{k}]"),
+                    grads.colors[i][k],
+                    Box::new(move |g| &mut g.colors[i][k]),
+                ));
+            }
+            if blend == Blend::Alpha {
+                probes.push((
+                    format!("opacity[{i}]"),
+                    grads.opacity.as_ref().unwrap()[i],
+                    Box::new(move |g| &mut g.opacity.as_mut().unwrap()[i]),
+                ));
+            }
+            for (name, an, get) in probes {
+                let step = if name.starts_with("pos") { 2e-3 } else { 1e-2 };
+                let mut plus = scene.clone();
+                *get(&mut plus.gaussians) += step;
+                let mut minus = scene.clone();
+                *get(&mut minus.gaussians) -= step;
+                let fd = (loss(&plus, &weights) - loss(&minus, &weights)) / (2.0 * f64::from(step));
+                let an = f64::from(an);
+                // The render is f32: a loss of ~10 carries ~1e-6 relative noise, i.e. ~5e-4 in
+                // a difference quotient, so tiny gradients are compared on an absolute floor.
+                let err = (fd - an).abs() / fd.abs().max(an.abs()).max(0.1);
+                assert!(
+                    err < 5e-3,
+                    "{blend:?} {name}: analytic {an}, finite difference {fd}"
+                );
+                checked += 1;
+            }
+        }
+        assert!(checked >= 40);
+    }
+}
+
+#[test]
+fn colour_least_squares_reproduces_a_reachable_image() {
+    // Render a scene, scramble its colours, solve: the colours come back.
+    for blend in [Blend::Sum, Blend::Alpha] {
+        let scene = random_scene(
+            9,
+            SceneSpec {
+                sigma_px: (2.0, 6.0),
+                ..SceneSpec::new(40, 30, 30, blend)
+            },
+        );
+        let target = render(&scene, 40, 30).unwrap();
+        let mut projected = project_scene(&scene, 40, 30);
+        for g in projected.iter_mut() {
+            g.color = [0.5; 3];
+        }
+        super::lsq::solve_colors(&mut projected, blend, 40, 30, &target.data, 200);
+        let fwd = forward(&projected, blend, 40, 30);
+        let err = fwd
+            .image
+            .iter()
+            .zip(&target.data)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0f32, f32::max);
+        assert!(err < 2e-3, "{blend:?}: max error {err}");
+    }
+}

@@ -1,0 +1,204 @@
+//! Stage-1 encoder: degenerate images, determinism, budgets, and the stored quality.
+#![cfg(feature = "encode")]
+
+use gsi::fit::{encode, Budget, EncodeOptions, Init, Target};
+use gsi::format::{read_file, Limits};
+use gsi::model::Blend;
+
+fn image(w: u32, h: u32, f: impl Fn(u32, u32) -> [f32; 3]) -> Target {
+    let mut data = Vec::with_capacity((w * h * 3) as usize);
+    for y in 0..h {
+        for x in 0..w {
+            data.extend(f(x, y));
+        }
+    }
+    Target {
+        width: w,
+        height: h,
+        data,
+    }
+}
+
+/// A smooth gradient with a disc and a bar: something with edges and flat parts.
+fn scene_like(w: u32, h: u32) -> Target {
+    image(w, h, |x, y| {
+        let (u, v) = (x as f32 / w as f32, y as f32 / h as f32);
+        let disc = ((u - 0.35).powi(2) + (v - 0.5).powi(2)).sqrt() < 0.2;
+        let bar = (0.65..0.75).contains(&u);
+        [
+            if disc { 0.9 } else { 0.2 + 0.5 * u },
+            if bar { 0.1 } else { 0.4 + 0.3 * v },
+            0.3 + 0.2 * (u + v),
+        ]
+    })
+}
+
+fn opts(budget: Budget, iterations: u32, blend: Blend) -> EncodeOptions {
+    EncodeOptions {
+        budget,
+        iterations,
+        blend,
+        ..EncodeOptions::default()
+    }
+}
+
+/// Decode the bytes and check every pixel is finite and the header matches the target.
+fn decodes(bytes: &[u8], t: &Target) -> gsi::render::RgbImage {
+    let f = read_file(bytes, Limits::default()).expect("the encoder writes valid files");
+    assert_eq!(
+        (f.records.header.width, f.records.header.height),
+        (t.width, t.height)
+    );
+    let scene = f.records.to_scene();
+    let g = &scene.gaussians;
+    assert!(g
+        .positions
+        .iter()
+        .flatten()
+        .chain(g.cov.iter().flatten())
+        .chain(g.colors.iter().flatten())
+        .all(|v| v.is_finite()));
+    let img = gsi::render::render(&scene, t.width, t.height).unwrap();
+    assert!(img.data.iter().all(|v| v.is_finite()));
+    img
+}
+
+#[test]
+fn degenerate_images_encode_to_finite_files() {
+    let cases = [
+        ("black", image(24, 16, |_, _| [0.0; 3])),
+        ("white", image(24, 16, |_, _| [1.0; 3])),
+        ("1x1", image(1, 1, |_, _| [0.2, 0.5, 0.9])),
+        ("1x40", image(1, 40, |_, y| [y as f32 / 40.0, 0.5, 0.1])),
+        ("40x1", image(40, 1, |x, _| [0.3, x as f32 / 40.0, 1.0])),
+        (
+            "noise",
+            image(16, 16, |x, y| {
+                [
+                    ((x * 7 + y * 13) % 17) as f32 / 16.0,
+                    ((x * 3 + y) % 5) as f32 / 4.0,
+                    0.5,
+                ]
+            }),
+        ),
+    ];
+    for (name, t) in &cases {
+        for blend in [Blend::Sum, Blend::Alpha] {
+            for init in [Init::Adaptive, Init::Random] {
+                let o = EncodeOptions {
+                    init,
+                    ..opts(Budget::Gaussians(20), 30, blend)
+                };
+                let e = encode(t, &o, &mut |p| {
+                    assert!(p.loss.is_finite(), "{name}: loss {}", p.loss)
+                })
+                .unwrap_or_else(|e| panic!("{name} {blend:?}: {e}"));
+                assert!(e.psnr > 0.0, "{name}: PSNR {}", e.psnr); // +∞ for an exact fit, never NaN
+                decodes(&e.bytes, t);
+            }
+        }
+    }
+}
+
+#[test]
+fn fitting_improves_and_the_stored_psnr_is_the_decoded_one() {
+    let t = scene_like(64, 48);
+    for blend in [Blend::Sum, Blend::Alpha] {
+        let mut first = None;
+        let e = encode(&t, &opts(Budget::Gaussians(120), 150, blend), &mut |p| {
+            first.get_or_insert(p.psnr);
+        })
+        .unwrap();
+        let start = first.unwrap();
+        assert!(
+            e.psnr > start + 1.0,
+            "{blend:?}: {start:.2} -> {:.2} dB",
+            e.psnr
+        );
+        assert!(e.psnr > 30.0, "{blend:?}: {:.2} dB", e.psnr);
+        // gCRM holds the PSNR of what a decoder shows.
+        let img = decodes(&e.bytes, &t);
+        let stored = read_file(&e.bytes[..], Limits::default())
+            .unwrap()
+            .metadata
+            .unwrap()
+            .psnr
+            .unwrap();
+        let measured = gsi::fit::loss::psnr8(&img.data, &t.data, t.width, t.height);
+        assert!(
+            (f64::from(stored) - measured).abs() < 1e-3,
+            "stored {stored}, measured {measured}"
+        );
+        assert!((e.psnr - measured).abs() < 1e-9);
+    }
+}
+
+#[test]
+fn the_same_seed_gives_the_same_file() {
+    let t = scene_like(40, 30);
+    let o = opts(Budget::Gaussians(60), 40, Blend::Alpha);
+    let a = encode(&t, &o, &mut |_| {}).unwrap().bytes;
+    let b = encode(&t, &o, &mut |_| {}).unwrap().bytes;
+    assert_eq!(a, b);
+    let c = encode(&t, &EncodeOptions { seed: 1, ..o }, &mut |_| {})
+        .unwrap()
+        .bytes;
+    assert_ne!(a, c);
+}
+
+#[test]
+fn budgets_choose_the_number_of_gaussians() {
+    let t = scene_like(96, 64);
+    let px = 96.0 * 64.0;
+    for bpp in [2.0f32, 4.0] {
+        let e = encode(&t, &opts(Budget::Bpp(bpp), 60, Blend::Sum), &mut |_| {}).unwrap();
+        let got = e.bytes.len() as f32 * 8.0 / px;
+        assert!(got <= bpp, "asked {bpp} bpp, got {got}");
+        assert!(got > 0.5 * bpp, "asked {bpp} bpp, got only {got}");
+    }
+    // A flat image meets a quality target with few Gaussians; a busy one needs more.
+    let flat = image(96, 64, |_, _| [0.4, 0.5, 0.6]);
+    let e_flat = encode(
+        &flat,
+        &opts(Budget::TargetPsnr(35.0), 60, Blend::Sum),
+        &mut |_| {},
+    )
+    .unwrap();
+    let e_busy = encode(
+        &t,
+        &opts(Budget::TargetPsnr(35.0), 60, Blend::Sum),
+        &mut |_| {},
+    )
+    .unwrap();
+    assert!(e_flat.psnr >= 35.0, "flat: {}", e_flat.psnr);
+    assert!(
+        e_flat.records.header.count <= 64,
+        "flat: {} Gaussians",
+        e_flat.records.header.count
+    );
+    assert!(
+        e_flat.records.header.count < e_busy.records.header.count,
+        "{} vs {}",
+        e_flat.records.header.count,
+        e_busy.records.header.count
+    );
+}
+
+#[test]
+fn opacity_is_not_stored_when_not_needed() {
+    let t = scene_like(32, 24);
+    let e = encode(
+        &t,
+        &opts(Budget::Gaussians(30), 20, Blend::Sum),
+        &mut |_| {},
+    )
+    .unwrap();
+    assert!(e.records.opacity.is_none());
+    let e = encode(
+        &t,
+        &opts(Budget::Gaussians(30), 20, Blend::Alpha),
+        &mut |_| {},
+    )
+    .unwrap();
+    assert!(e.records.opacity.is_some());
+}
