@@ -276,3 +276,128 @@ fn a_failed_decode_leaves_the_output_untouched() {
     assert_eq!(names.len(), 1, "{names:?}");
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+/// A small test image written as a PNG of the given colour type.
+fn write_png(path: &Path, w: u32, h: u32, color: image::ExtendedColorType) {
+    let mut rgb = Vec::new();
+    for y in 0..h {
+        for x in 0..w {
+            rgb.extend([(x * 255 / w.max(1)) as u8, (y * 255 / h.max(1)) as u8, 90]);
+        }
+    }
+    let img = image::DynamicImage::ImageRgb8(image::RgbImage::from_raw(w, h, rgb).unwrap());
+    let img = match color {
+        image::ExtendedColorType::L16 => image::DynamicImage::ImageLuma16(img.to_luma16()),
+        image::ExtendedColorType::Rgba8 => image::DynamicImage::ImageRgba8(img.to_rgba8()),
+        image::ExtendedColorType::Rgb16 => image::DynamicImage::ImageRgb16(img.to_rgb16()),
+        _ => img,
+    };
+    img.save(path).unwrap();
+}
+
+#[test]
+fn encode_decode_roundtrip_through_files_and_pipes() {
+    let dir = tmp_dir("encode");
+    for (name, color) in [
+        ("rgb8", image::ExtendedColorType::Rgb8),
+        ("grey16", image::ExtendedColorType::L16),
+        ("rgba8", image::ExtendedColorType::Rgba8),
+        ("rgb16", image::ExtendedColorType::Rgb16),
+    ] {
+        let png = dir.join(format!("{name}.png"));
+        write_png(&png, 40, 24, color);
+        let gsi_path = dir.join(format!("{name}.gsi"));
+        let out = gsi(&[
+            "encode",
+            png.to_str().unwrap(),
+            "-o",
+            gsi_path.to_str().unwrap(),
+            "--gaussians",
+            "40",
+            "--iterations",
+            "30",
+        ]);
+        assert!(
+            out.status.success(),
+            "{name}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        // The summary line names N, bytes, bpp, Cr and PSNR.
+        let err = String::from_utf8_lossy(&out.stderr);
+        for word in ["N 40", "bytes", "bpp", "Cr", "PSNR"] {
+            assert!(err.contains(word), "{name}: {err}");
+        }
+        let info = gsi(&["info", "--json", gsi_path.to_str().unwrap()]);
+        let j: serde_json::Value = serde_json::from_slice(&info.stdout).unwrap();
+        assert_eq!(
+            (j["width"].as_u64(), j["height"].as_u64()),
+            (Some(40), Some(24))
+        );
+        assert!(
+            j["psnr"].as_f64().is_some_and(|p| p > 15.0),
+            "{name}: {}",
+            j["psnr"]
+        );
+    }
+    // stdin to stdout, then decode from stdin.
+    let bytes = std::fs::read(dir.join("rgb8.png")).unwrap();
+    let out = gsi_stdin(
+        &[
+            "encode",
+            "-",
+            "-o",
+            "-",
+            "--gaussians",
+            "20",
+            "--iterations",
+            "10",
+            "--quiet",
+        ],
+        &bytes,
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        out.stderr.is_empty(),
+        "--quiet printed {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let dec = gsi_stdin(&["decode", "-", "-o", "-"], &out.stdout);
+    assert!(dec.status.success());
+    let img = image::load_from_memory(&dec.stdout).unwrap();
+    assert_eq!((img.width(), img.height()), (40, 24));
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn encode_refuses_what_it_cannot_do() {
+    let dir = tmp_dir("encode-refuse");
+    let png = dir.join("a.png");
+    write_png(&png, 8, 8, image::ExtendedColorType::Rgb8);
+    let p = png.to_str().unwrap();
+    let o = dir.join("a.gsi");
+    let o = o.to_str().unwrap();
+    assert_refused(&gsi(&["encode", p, "-o", o, "--device", "gpu"]), "gpu");
+    assert_refused(&gsi(&["encode", p, "-o", o, "--bpp", "0"]), "bpp 0");
+    assert_refused(
+        &gsi(&["encode", p, "-o", o, "--iterations", "0"]),
+        "0 iterations",
+    );
+    assert_refused(
+        &gsi_stdin(&["encode", "-", "-o", o], b"not an image"),
+        "junk",
+    );
+    assert_refused(&gsi(&["encode", "/nonexistent.png", "-o", o]), "missing");
+    assert!(!Path::new(o).exists());
+    // Two budgets at once are a usage error.
+    assert_eq!(
+        gsi(&["encode", p, "-o", o, "--bpp", "1", "--gaussians", "3"])
+            .status
+            .code(),
+        Some(2)
+    );
+    std::fs::remove_dir_all(dir).unwrap();
+}

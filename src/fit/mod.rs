@@ -64,7 +64,7 @@ impl Default for EncodeOptions {
     fn default() -> Self {
         EncodeOptions {
             budget: Budget::Bpp(1.0),
-            iterations: 600,
+            iterations: 200,
             init: Init::Adaptive,
             blend: Blend::Sum,
             seed: 0,
@@ -206,8 +206,14 @@ impl<'a> Fitter<'a> {
     }
 
     /// One optimizer step. With `qat`, the forward pass renders the quantized parameters
-    /// and their gradient is applied to the float ones (straight-through).
-    pub fn step(&mut self, lr: &LearningRates, qat: Option<BitDepths>) -> (f32, f64) {
+    /// and their gradient is applied to the float ones (straight-through). Returns the
+    /// loss and, when `measure` is set, the PSNR of the image the step rendered.
+    pub fn step(
+        &mut self,
+        lr: &LearningRates,
+        qat: Option<BitDepths>,
+        measure: bool,
+    ) -> (f32, Option<f64>) {
         let (w, h) = (self.target.width, self.target.height);
         let used = match qat {
             Some(bits) => self.quantized(bits),
@@ -217,7 +223,7 @@ impl<'a> Fitter<'a> {
         let projected = project_scene(&scene, w, h);
         let fwd = raster::forward(&projected, self.blend, w, h);
         let (value, dl) = self.loss.eval(&fwd.image, &self.target.data, w, h);
-        let psnr = loss::psnr8(&fwd.image, &self.target.data, w, h);
+        let psnr = measure.then(|| loss::psnr8(&fwd.image, &self.target.data, w, h));
         let pg = raster::backward(&fwd, &projected, &dl, Need::All);
         let mut grads = params::zero_grads(&self.params);
         params::chain(&scene.gaussians, &projected, &pg, w, h, &mut grads);
@@ -354,8 +360,9 @@ pub fn encode(
                     }
                 }
                 let qat = (it >= qat_from).then_some(bits);
-                let (loss, psnr) = fitter.step(&opts.lr.scaled(schedule(it, total)), qat);
-                if it % 10 == 0 || it + 1 == total {
+                let measure = it % 10 == 0 || it + 1 == total;
+                let (loss, psnr) = fitter.step(&opts.lr.scaled(schedule(it, total)), qat, measure);
+                if let Some(psnr) = psnr {
                     report(it + 1, total, fitter.params.len(), loss, psnr, curve);
                     if stop_at.is_some_and(|p| qat.is_some() && psnr >= p) {
                         break;

@@ -121,6 +121,13 @@ pub fn render_into(scene: &Scene, width: u32, height: u32, out: &mut [f32]) -> R
             "Gaussian attribute vectors have different lengths",
         ));
     }
+    if u32::try_from(scene.gaussians.len()).is_err() {
+        // Tile lists hold `u32` indices.
+        return Err(Error::new(
+            ErrorKind::LimitExceeded,
+            "more than 2^32 - 1 Gaussians",
+        ));
+    }
     let projected = project_scene(scene, width, height);
     cpu::render_projected(
         &projected,

@@ -75,7 +75,7 @@ impl Projected {
     /// evaluated exactly as the contract says.
     #[inline]
     pub fn cutoff(&self) -> f32 {
-        ((f64::from(ALPHA_MIN) / f64::from(self.opacity)).ln() - 1e-3) as f32
+        cutoff_of(self.opacity)
     }
 
     /// The columns of `xs` on the row at vertical offset `dy` where `power` may reach
@@ -105,6 +105,12 @@ impl Projected {
         let hi = ((centre + half).ceil() + 2.0).clamp(s, e) as u32;
         lo..hi.max(lo)
     }
+}
+
+/// [`Projected::cutoff`] for an opacity.
+#[inline]
+fn cutoff_of(opacity: f32) -> f32 {
+    ((f64::from(ALPHA_MIN) / f64::from(opacity)).ln() - 1e-3) as f32
 }
 
 /// Project Gaussian `index` of `scene` for a `width × height` output.
@@ -273,5 +279,16 @@ mod tests {
         assert!(p([0.5, f32::INFINITY], None).is_none());
         assert!(p([-5.0, 0.5], None).is_none());
         assert!(p([0.5, 1e30], None).is_none());
+    }
+
+    #[test]
+    fn cutoff_is_below_the_threshold() {
+        for o in [ALPHA_MIN, 0.01, 0.1, 0.5, 0.99, 1.0] {
+            let cut = cutoff_of(o);
+            // Just below the cut-off, alpha is under the threshold; at the true
+            // threshold, it is (about) on it.
+            assert!(o * cut.exp() < ALPHA_MIN, "{o}");
+            assert!(o * (cut + 2e-3).exp() >= ALPHA_MIN, "{o}");
+        }
     }
 }

@@ -1,0 +1,59 @@
+//! Decoding benchmarks: bytes to model, and model to pixels on the CPU.
+//!
+//! Scenes come from `gsi::synth::random_scene` at 768×512 with standard deviations of
+//! 0.5 to 8 px, which is what fitted sets of that size look like.
+
+use criterion::{criterion_group, criterion_main, Criterion, SamplingMode};
+use gsi::format::{read_file, to_bytes, BitDepths, Limits, Records, WriteOptions};
+use gsi::model::Blend;
+use gsi::render::render_into;
+use gsi::synth::{random_scene, SceneSpec};
+use std::hint::black_box;
+use std::time::Duration;
+
+const WIDTH: u32 = 768;
+const HEIGHT: u32 = 512;
+const COUNTS: [(&str, usize); 2] = [("10k", 10_000), ("100k", 100_000)];
+
+fn parse_dequantize(c: &mut Criterion) {
+    let mut group = c.benchmark_group("parse_dequantize");
+    group.sample_size(20).warm_up_time(Duration::from_secs(1));
+    for (name, n) in COUNTS {
+        let scene = random_scene(1, SceneSpec::new(WIDTH, HEIGHT, n, Blend::Sum));
+        let records = Records::from_scene(&scene, BitDepths::default());
+        let bytes = to_bytes(&records, &WriteOptions::default()).expect("in-memory write");
+        group.bench_function(name, |b| {
+            b.iter(|| {
+                let file = read_file(black_box(&bytes[..]), Limits::default()).expect("valid file");
+                file.records.to_scene()
+            })
+        });
+    }
+    group.finish();
+}
+
+fn render_cpu(c: &mut Criterion) {
+    let mut group = c.benchmark_group("render_cpu");
+    group
+        .sample_size(20)
+        .warm_up_time(Duration::from_secs(1))
+        .measurement_time(Duration::from_secs(5))
+        // One render is milliseconds to a fraction of a second: equal-sized samples
+        // keep the total time bounded where linear sampling would not.
+        .sampling_mode(SamplingMode::Flat);
+    let mut out = vec![0.0f32; (WIDTH * HEIGHT * 3) as usize];
+    for blend in [Blend::Sum, Blend::Alpha] {
+        for (name, n) in COUNTS {
+            let scene = random_scene(2, SceneSpec::new(WIDTH, HEIGHT, n, blend));
+            group.bench_function(format!("{}/{name}", blend.name()), |b| {
+                b.iter(|| {
+                    render_into(black_box(&scene), WIDTH, HEIGHT, &mut out).expect("valid size")
+                })
+            });
+        }
+    }
+    group.finish();
+}
+
+criterion_group!(benches, parse_dequantize, render_cpu);
+criterion_main!(benches);

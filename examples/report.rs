@@ -1,0 +1,558 @@
+//! The encoder figures of BENCHMARKS.md, from one command:
+//!
+//! ```sh
+//! cargo run --release --example report -- [--kodak DIR] [--lol DIR] [--bpp 0.5,1.0]
+//!     [--iterations T] [--limit N] [--curve-image FILE] [--curve-iterations T] [--out DIR]
+//! ```
+//!
+//! For every image and bpp target it encodes, decodes and scores the file, and makes a
+//! JPEG of at most the same size with the `image` crate's encoder (the best quality that
+//! fits). It also fits one image from the adaptive and from the paper's random start.
+//! Results go to `DIR/encode.json` and SVG plots in `DIR`, and the section between the
+//! `report:encode` markers of BENCHMARKS.md is rewritten, with the machine and commit.
+
+use gsi::fit::{encode, Budget, EncodeOptions, Init, Progress, Target};
+use gsi::metrics::{self, Rgb8};
+use plotters::prelude::*;
+use serde_json::json;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+struct Args {
+    kodak: Option<PathBuf>,
+    lol: Option<PathBuf>,
+    bpp: Vec<f32>,
+    iterations: u32,
+    limit: usize,
+    curve_image: Option<PathBuf>,
+    curve_iterations: u32,
+    out: PathBuf,
+}
+
+fn parse_args() -> Args {
+    let shared = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data");
+    let mut a = Args {
+        kodak: Some(shared.join("kodak")),
+        lol: Some(shared.join("LOL/eval15/high")),
+        bpp: vec![0.5, 1.0],
+        iterations: EncodeOptions::default().iterations,
+        limit: usize::MAX,
+        curve_image: Some(shared.join("kodak/kodim23.png")),
+        curve_iterations: 1000,
+        out: PathBuf::from("bench"),
+    };
+    let mut it = std::env::args().skip(1);
+    while let Some(flag) = it.next() {
+        let mut value = || it.next().unwrap_or_else(|| panic!("{flag} needs a value"));
+        match flag.as_str() {
+            "--kodak" => a.kodak = Some(value().into()),
+            "--lol" => a.lol = Some(value().into()),
+            "--no-kodak" => a.kodak = None,
+            "--no-lol" => a.lol = None,
+            "--bpp" => {
+                a.bpp = value()
+                    .split(',')
+                    .map(|v| v.parse().expect("--bpp takes numbers"))
+                    .collect()
+            }
+            "--iterations" => a.iterations = value().parse().expect("--iterations takes a number"),
+            "--limit" => a.limit = value().parse().expect("--limit takes a number"),
+            "--curve-image" => a.curve_image = Some(value().into()),
+            "--no-curve" => a.curve_image = None,
+            "--curve-iterations" => a.curve_iterations = value().parse().expect("a number"),
+            "--out" => a.out = value().into(),
+            other => panic!("unknown argument {other}"),
+        }
+    }
+    a
+}
+
+fn load(path: &Path) -> (Target, Vec<u8>) {
+    let img = image::open(path)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+        .to_rgb8();
+    let (width, height) = img.dimensions();
+    let raw = img.into_raw();
+    let data = raw.iter().map(|&v| f32::from(v) / 255.0).collect();
+    (
+        Target {
+            width,
+            height,
+            data,
+        },
+        raw,
+    )
+}
+
+fn images(dir: &Path, limit: usize) -> Vec<PathBuf> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
+        .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "png"))
+        .collect();
+    v.sort();
+    v.truncate(limit);
+    v
+}
+
+/// The best-quality baseline JPEG (4:2:0 as the `image` crate writes it) no larger than
+/// `budget` bytes, decoded: `(quality, bytes, rgb)`.
+fn jpeg_at_most(rgb: &[u8], w: u32, h: u32, budget: usize) -> Option<(u8, usize, Vec<u8>)> {
+    use image::ImageEncoder;
+    let enc = |q: u8| {
+        let mut out = Vec::new();
+        image::codecs::jpeg::JpegEncoder::new_with_quality(&mut out, q)
+            .write_image(rgb, w, h, image::ExtendedColorType::Rgb8)
+            .expect("in-memory JPEG");
+        out
+    };
+    let (mut lo, mut hi) = (1u8, 100u8);
+    if enc(1).len() > budget {
+        return None;
+    }
+    while lo < hi {
+        let mid = (lo + hi).div_ceil(2);
+        if enc(mid).len() <= budget {
+            lo = mid;
+        } else {
+            hi = mid - 1;
+        }
+    }
+    let bytes = enc(lo);
+    let decoded = image::load_from_memory(&bytes)
+        .expect("own JPEG decodes")
+        .to_rgb8()
+        .into_raw();
+    Some((lo, bytes.len(), decoded))
+}
+
+fn machine() -> String {
+    let cpu = std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("model name"))
+                .map(|l| l.split(':').nth(1).unwrap_or("").trim().to_owned())
+        })
+        .unwrap_or_else(|| "unknown CPU".into());
+    let cores = std::thread::available_parallelism()
+        .map(|n| n.get())
+        .unwrap_or(1);
+    format!("{cores} cores, {cpu}")
+}
+
+fn commit() -> String {
+    let git = |args: &[&str]| {
+        std::process::Command::new("git")
+            .args(args)
+            .current_dir(env!("CARGO_MANIFEST_DIR"))
+            .output()
+            .ok()
+            .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_owned())
+            .unwrap_or_default()
+    };
+    let dirty = !git(&["status", "--porcelain", "--untracked-files=no"]).is_empty();
+    format!(
+        "{}{}",
+        git(&["rev-parse", "--short", "HEAD"]),
+        if dirty { "-dirty" } else { "" }
+    )
+}
+
+struct Row {
+    set: String,
+    image: String,
+    target_bpp: f32,
+    gaussians: u32,
+    bytes: usize,
+    bpp: f64,
+    psnr: f64,
+    ssim: f64,
+    seconds: f64,
+    jpeg: Option<(u8, usize, f64, f64)>,
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    if v.is_empty() {
+        f64::NAN
+    } else {
+        v[v.len() / 2]
+    }
+}
+
+fn mean(v: impl Iterator<Item = f64>) -> f64 {
+    let (s, n) = v.fold((0.0, 0usize), |(s, n), x| (s + x, n + 1));
+    s / n.max(1) as f64
+}
+
+fn main() {
+    let args = parse_args();
+    std::fs::create_dir_all(&args.out).expect("output folder");
+    let mut rows = Vec::new();
+    let sets: Vec<(&str, &PathBuf)> = [("kodak", &args.kodak), ("lol-high", &args.lol)]
+        .into_iter()
+        .filter_map(|(n, d)| d.as_ref().map(|d| (n, d)))
+        .collect();
+    for (set, dir) in sets {
+        for path in images(dir, args.limit) {
+            let (target, rgb) = load(&path);
+            let (w, h) = (target.width, target.height);
+            for &bpp in &args.bpp {
+                let opts = EncodeOptions {
+                    budget: Budget::Bpp(bpp),
+                    iterations: args.iterations,
+                    ..EncodeOptions::default()
+                };
+                let t0 = Instant::now();
+                let e = encode(&target, &opts, &mut |_| {}).expect("encode");
+                let seconds = t0.elapsed().as_secs_f64();
+                let decoded = gsi::render::render(&e.records.to_scene(), w, h)
+                    .expect("render")
+                    .to_rgb8();
+                let score = |img: &[u8]| {
+                    let (a, b) = (
+                        Rgb8::new(w, h, &rgb).unwrap(),
+                        Rgb8::new(w, h, img).unwrap(),
+                    );
+                    (metrics::psnr(a, b).unwrap(), metrics::ssim(a, b).unwrap())
+                };
+                let (psnr, ssim) = score(&decoded);
+                let jpeg = jpeg_at_most(&rgb, w, h, e.bytes.len()).map(|(q, n, img)| {
+                    let (p, s) = score(&img);
+                    (q, n, p, s)
+                });
+                let row = Row {
+                    set: set.into(),
+                    image: path.file_name().unwrap().to_string_lossy().into_owned(),
+                    target_bpp: bpp,
+                    gaussians: e.records.header.count,
+                    bytes: e.bytes.len(),
+                    bpp: e.bytes.len() as f64 * 8.0 / f64::from(w * h),
+                    psnr,
+                    ssim,
+                    seconds,
+                    jpeg,
+                };
+                eprintln!(
+                    "{set} {} @{bpp}: N {} {:.3} bpp {:.2} dB {:.1}s | JPEG {}",
+                    row.image,
+                    row.gaussians,
+                    row.bpp,
+                    row.psnr,
+                    row.seconds,
+                    row.jpeg
+                        .map_or("-".into(), |j| format!("q{} {:.2} dB", j.0, j.2))
+                );
+                rows.push(row);
+            }
+        }
+    }
+    let curve = args.curve_image.as_ref().map(|p| init_curves(p, &args));
+    write_outputs(&args, &rows, curve.as_ref());
+}
+
+/// Curves of the adaptive and the random start on one image with the same N.
+struct Curves {
+    image: String,
+    gaussians: usize,
+    random: Vec<Progress>,
+    random_psnr: f64,
+    adaptive: Vec<Progress>,
+    adaptive_psnr: f64,
+    adaptive_iterations: u32,
+}
+
+fn init_curves(path: &Path, args: &Args) -> Curves {
+    let (target, _) = load(path);
+    let n = 4000;
+    let run = |init, iterations| {
+        let opts = EncodeOptions {
+            budget: Budget::Gaussians(n),
+            iterations,
+            init,
+            ..EncodeOptions::default()
+        };
+        let mut curve = Vec::new();
+        let e = encode(&target, &opts, &mut |p| curve.push(*p)).expect("encode");
+        (curve, e.psnr)
+    };
+    let (random, random_psnr) = run(Init::Random, args.curve_iterations);
+    let adaptive_iterations = (args.curve_iterations / 10).max(1);
+    let (adaptive, adaptive_psnr) = run(Init::Adaptive, adaptive_iterations);
+    eprintln!(
+        "curve: random {} it {:.2} dB; adaptive {} it {:.2} dB",
+        args.curve_iterations, random_psnr, adaptive_iterations, adaptive_psnr
+    );
+    Curves {
+        image: path.file_name().unwrap().to_string_lossy().into_owned(),
+        gaussians: n,
+        random,
+        random_psnr,
+        adaptive,
+        adaptive_psnr,
+        adaptive_iterations,
+    }
+}
+
+fn write_outputs(args: &Args, rows: &[Row], curve: Option<&Curves>) {
+    let json_rows: Vec<_> = rows
+        .iter()
+        .map(|r| {
+            json!({
+                "set": r.set, "image": r.image, "target_bpp": r.target_bpp, "gaussians": r.gaussians,
+                "bytes": r.bytes, "bpp": r.bpp, "psnr": r.psnr, "ssim": r.ssim, "seconds": r.seconds,
+                "jpeg": r.jpeg.map(|(q, n, p, s)| json!({"quality": q, "bytes": n, "psnr": p, "ssim": s})),
+            })
+        })
+        .collect();
+    let curve_json = curve.map(|c| {
+        let pts = |v: &[Progress]| v.iter().map(|p| json!([p.iteration, p.psnr, p.seconds])).collect::<Vec<_>>();
+        json!({"image": c.image, "gaussians": c.gaussians, "random": pts(&c.random), "random_psnr": c.random_psnr,
+               "adaptive": pts(&c.adaptive), "adaptive_psnr": c.adaptive_psnr})
+    });
+    let doc = json!({"machine": machine(), "commit": commit(), "iterations": args.iterations, "rows": json_rows, "init_curves": curve_json});
+    std::fs::write(
+        args.out.join("encode.json"),
+        serde_json::to_string_pretty(&doc).unwrap(),
+    )
+    .expect("write json");
+    plot_rd(rows, &args.out.join("psnr_bpp.svg"));
+    plot_time(rows, &args.out.join("psnr_time.svg"));
+    if let Some(c) = curve {
+        plot_curves(c, &args.out.join("init_curves.svg"));
+    }
+    let md = markdown(args, rows, curve);
+    let bench = Path::new(env!("CARGO_MANIFEST_DIR")).join("BENCHMARKS.md");
+    let old = std::fs::read_to_string(&bench).unwrap_or_default();
+    let (start, end) = ("<!-- report:encode:start -->", "<!-- report:encode:end -->");
+    let section = format!("{start}\n{md}{end}");
+    let new = match (old.find(start), old.find(end)) {
+        (Some(a), Some(b)) if a < b => format!("{}{}{}", &old[..a], section, &old[b + end.len()..]),
+        _ => format!("{old}\n{section}\n"),
+    };
+    std::fs::write(&bench, new).expect("write BENCHMARKS.md");
+    eprintln!(
+        "wrote {} and {}",
+        args.out.join("encode.json").display(),
+        bench.display()
+    );
+}
+
+fn markdown(args: &Args, rows: &[Row], curve: Option<&Curves>) -> String {
+    use std::fmt::Write;
+    let mut s = String::new();
+    let _ = writeln!(s, "## Stage-1 encoder: quality against size and time\n");
+    let _ = writeln!(
+        s,
+        "Machine: {}. Commit: `{}`. Release build, CPU only, {} iterations, adaptive start, `sum` blending, \
+         default bit depths. Regenerate with `cargo run --release --example report` (writes `{}/`).\n",
+        machine(),
+        commit(),
+        args.iterations,
+        args.out.display()
+    );
+    let _ = writeln!(s, "PSNR and SSIM on 8-bit RGB of the decoded file against the original. JPEG: the `image` crate's baseline encoder at the highest quality whose file is no larger than the gsi file (equal bytes or fewer).\n");
+    let _ = writeln!(s, "| set | target bpp | images | mean bpp | gsi PSNR | gsi SSIM | JPEG PSNR (≤ same bytes) | JPEG SSIM | median encode s | mean N |");
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|");
+    let mut groups: Vec<(String, f32)> =
+        rows.iter().map(|r| (r.set.clone(), r.target_bpp)).collect();
+    groups.dedup();
+    groups.sort_by(|a, b| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)));
+    groups.dedup();
+    for (set, bpp) in &groups {
+        let g: Vec<&Row> = rows
+            .iter()
+            .filter(|r| &r.set == set && r.target_bpp == *bpp)
+            .collect();
+        let jp: Vec<&(u8, usize, f64, f64)> = g.iter().filter_map(|r| r.jpeg.as_ref()).collect();
+        let _ = writeln!(
+            s,
+            "| {set} | {bpp} | {} | {:.3} | {:.2} | {:.4} | {} | {} | {:.1} | {:.0} |",
+            g.len(),
+            mean(g.iter().map(|r| r.bpp)),
+            mean(g.iter().map(|r| r.psnr)),
+            mean(g.iter().map(|r| r.ssim)),
+            if jp.is_empty() {
+                "-".into()
+            } else {
+                format!(
+                    "{:.2} ({} of {})",
+                    mean(jp.iter().map(|j| j.2)),
+                    jp.len(),
+                    g.len()
+                )
+            },
+            if jp.is_empty() {
+                "-".into()
+            } else {
+                format!("{:.4}", mean(jp.iter().map(|j| j.3)))
+            },
+            median(g.iter().map(|r| r.seconds).collect()),
+            mean(g.iter().map(|r| f64::from(r.gaussians))),
+        );
+    }
+    let _ = writeln!(s, "\nReference (`../shared/data/README.md`, libjpeg 4:2:0 via Pillow, Kodak mean, interpolated): JPEG 29.36 dB at 0.5 bpp, 32.88 dB at 1.0 bpp; WebP 31.79 / 35.28; AVIF 32.66 / 36.12.\n");
+    let _ = writeln!(
+        s,
+        "![PSNR against bpp]({}/psnr_bpp.svg)\n![PSNR against encode time]({}/psnr_time.svg)\n",
+        args.out.display(),
+        args.out.display()
+    );
+    if let Some(c) = curve {
+        let reached = c
+            .adaptive
+            .iter()
+            .find(|p| p.psnr >= c.random_psnr)
+            .map(|p| p.iteration);
+        let _ = writeln!(
+            s,
+            "### Adaptive against random initialization\n\n{}, N = {}: the paper's random start reaches **{:.2} dB** (stored file) after {} iterations; \
+             the adaptive start reaches **{:.2} dB** after {} iterations (1/10). First iteration at which the adaptive run's render \
+             is at least the random run's final PSNR: {}.\n\n![PSNR against iteration]({}/init_curves.svg)\n",
+            c.image,
+            c.gaussians,
+            c.random_psnr,
+            args.curve_iterations,
+            c.adaptive_psnr,
+            c.adaptive_iterations,
+            reached.map_or("not reached".into(), |i| i.to_string()),
+            args.out.display()
+        );
+    }
+    let _ = writeln!(s, "<details><summary>Per image</summary>\n\n| set | image | target | N | bytes | bpp | PSNR | SSIM | s | JPEG q | JPEG bytes | JPEG PSNR |\n|---|---|---|---|---|---|---|---|---|---|---|---|");
+    for r in rows {
+        let j = r.jpeg.map_or("| - | - | - |".into(), |(q, n, p, _)| {
+            format!("| {q} | {n} | {p:.2} |")
+        });
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {} | {} | {:.3} | {:.2} | {:.4} | {:.1} {j}",
+            r.set, r.image, r.target_bpp, r.gaussians, r.bytes, r.bpp, r.psnr, r.ssim, r.seconds
+        );
+    }
+    let _ = writeln!(s, "\n</details>\n");
+    s
+}
+
+fn plot_rd(rows: &[Row], path: &Path) {
+    let root = SVGBackend::new(path, (720, 480)).into_drawing_area();
+    root.fill(&WHITE).unwrap();
+    let (lo, hi) = rows.iter().fold((f64::MAX, f64::MIN), |(a, b), r| {
+        (a.min(r.psnr), b.max(r.psnr))
+    });
+    let maxb = rows.iter().map(|r| r.bpp).fold(0.0, f64::max) * 1.1;
+    let mut c = ChartBuilder::on(&root)
+        .caption(
+            "PSNR against file size (each point an image)",
+            ("sans-serif", 18),
+        )
+        .margin(10)
+        .x_label_area_size(40)
+        .y_label_area_size(50)
+        .build_cartesian_2d(0.0..maxb.max(0.1), (lo - 2.0).min(20.0)..hi + 2.0)
+        .unwrap();
+    c.configure_mesh()
+        .x_desc("bits per pixel")
+        .y_desc("PSNR (dB)")
+        .draw()
+        .unwrap();
+    c.draw_series(
+        rows.iter()
+            .map(|r| Circle::new((r.bpp, r.psnr), 3, BLUE.filled())),
+    )
+    .unwrap()
+    .label("gsi")
+    .legend(|(x, y)| Circle::new((x, y), 3, BLUE.filled()));
+    c.draw_series(rows.iter().filter_map(|r| {
+        r.jpeg
+            .map(|j| Cross::new((j.1 as f64 * r.bpp / r.bytes as f64, j.2), 4, RED))
+    }))
+    .unwrap()
+    .label("JPEG (image crate), ≤ same bytes")
+    .legend(|(x, y)| Cross::new((x, y), 4, RED));
+    c.configure_series_labels()
+        .background_style(WHITE)
+        .border_style(BLACK)
+        .draw()
+        .unwrap();
+    root.present().unwrap();
+}
+
+fn plot_time(rows: &[Row], path: &Path) {
+    let root = SVGBackend::new(path, (720, 480)).into_drawing_area();
+    root.fill(&WHITE).unwrap();
+    let (lo, hi) = rows.iter().fold((f64::MAX, f64::MIN), |(a, b), r| {
+        (a.min(r.psnr), b.max(r.psnr))
+    });
+    let maxt = rows.iter().map(|r| r.seconds).fold(0.0, f64::max) * 1.1;
+    let mut c = ChartBuilder::on(&root)
+        .caption(
+            "PSNR against encode time (each point an image and target)",
+            ("sans-serif", 18),
+        )
+        .margin(10)
+        .x_label_area_size(40)
+        .y_label_area_size(50)
+        .build_cartesian_2d(0.0..maxt.max(1.0), (lo - 2.0).min(20.0)..hi + 2.0)
+        .unwrap();
+    c.configure_mesh()
+        .x_desc("encode time (s)")
+        .y_desc("PSNR (dB)")
+        .draw()
+        .unwrap();
+    c.draw_series(
+        rows.iter()
+            .map(|r| Circle::new((r.seconds, r.psnr), 3, BLUE.filled())),
+    )
+    .unwrap();
+    root.present().unwrap();
+}
+
+fn plot_curves(cv: &Curves, path: &Path) {
+    let root = SVGBackend::new(path, (720, 480)).into_drawing_area();
+    root.fill(&WHITE).unwrap();
+    let all = cv.random.iter().chain(&cv.adaptive);
+    let (lo, hi) = all.fold((f64::MAX, f64::MIN), |(a, b), p| {
+        (a.min(p.psnr), b.max(p.psnr))
+    });
+    let maxi = cv.random.last().map_or(1, |p| p.iteration) as f64;
+    let mut c = ChartBuilder::on(&root)
+        .caption(
+            format!(
+                "{}: PSNR of the render during fitting, N = {}",
+                cv.image, cv.gaussians
+            ),
+            ("sans-serif", 18),
+        )
+        .margin(10)
+        .x_label_area_size(40)
+        .y_label_area_size(50)
+        .build_cartesian_2d(0.0..maxi, (lo - 1.0).max(0.0)..hi + 1.0)
+        .unwrap();
+    c.configure_mesh()
+        .x_desc("iteration")
+        .y_desc("PSNR (dB)")
+        .draw()
+        .unwrap();
+    c.draw_series(LineSeries::new(
+        cv.random.iter().map(|p| (f64::from(p.iteration), p.psnr)),
+        RED,
+    ))
+    .unwrap()
+    .label("random start (paper)")
+    .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED));
+    c.draw_series(LineSeries::new(
+        cv.adaptive.iter().map(|p| (f64::from(p.iteration), p.psnr)),
+        BLUE,
+    ))
+    .unwrap()
+    .label("adaptive start")
+    .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE));
+    c.configure_series_labels()
+        .background_style(WHITE)
+        .border_style(BLACK)
+        .draw()
+        .unwrap();
+    root.present().unwrap();
+}
