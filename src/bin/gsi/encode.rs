@@ -23,7 +23,7 @@ pub struct Args {
     #[arg(long, group = "budget")]
     target_psnr: Option<f32>,
     /// Optimizer iterations.
-    #[arg(long, default_value_t = 600)]
+    #[arg(long, default_value_t = 200)]
     iterations: u32,
     /// Initialization: content-adaptive, or the paper's random cold start.
     #[arg(long, value_enum, default_value_t = InitArg::Adaptive)]
