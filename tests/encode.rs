@@ -103,9 +103,18 @@ fn degenerate_images_encode_to_finite_files() {
 #[test]
 fn fitting_improves_and_the_stored_psnr_is_the_decoded_one() {
     let t = scene_like(64, 48);
-    for blend in [Blend::Sum, Blend::Alpha] {
+    let paper = gsi::fit::Loss::L1MsSsim { lambda: 0.2 };
+    for (blend, loss) in [
+        (Blend::Sum, gsi::fit::Loss::L2),
+        (Blend::Alpha, gsi::fit::Loss::L2),
+        (Blend::Sum, paper),
+    ] {
         let mut first = None;
-        let e = encode(&t, &opts(Budget::Gaussians(120), 150, blend), &mut |p| {
+        let o = EncodeOptions {
+            loss,
+            ..opts(Budget::Gaussians(120), 150, blend)
+        };
+        let e = encode(&t, &o, &mut |p| {
             first.get_or_insert(p.psnr);
         })
         .unwrap();

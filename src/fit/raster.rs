@@ -13,6 +13,7 @@
 
 use crate::model::Blend;
 use crate::render::{Projected, ALPHA_MAX, ALPHA_MIN, TILE, TRANSMITTANCE_MIN};
+use std::ops::Range;
 
 #[cfg(feature = "parallel")]
 use rayon::prelude::*;
@@ -110,53 +111,75 @@ impl Rect {
     }
 }
 
-/// Visit the pixels of `rect` that Gaussian `g` may touch, as the CPU renderer does: the
-/// rows of its box, on each row the columns of its analytic span. `f(i, j, alpha, dx,
-/// dy, capped)` is called where the spec's rule lets the Gaussian touch the pixel.
+/// Columns and rows of `rect` inside the box of `g`; `None` when they do not meet.
 #[inline(always)]
-fn for_each_pixel(
-    g: &Projected,
-    rect: Rect,
-    blend: Blend,
-    mut f: impl FnMut(u32, u32, f32, f32, f32, bool),
-) {
+fn clip(g: &Projected, rect: Rect) -> Option<(Range<u32>, Range<u32>)> {
     let b = &g.bbox;
     let xs = b.x0.max(rect.x0)..(b.x1 + 1).min(rect.x1);
     let ys = b.y0.max(rect.y0)..(b.y1 + 1).min(rect.y1);
-    if xs.is_empty() {
-        return;
+    (!xs.is_empty() && !ys.is_empty()).then_some((xs, ys))
+}
+
+/// The spec's per-pixel rule (§6.3) at offset `(dx, dy)`, with `cdy = C·dy²` hoisted out
+/// of the row: `(alpha, capped)` where the Gaussian touches the pixel. Below `cut`
+/// ([`Projected::cutoff`]) alpha is certainly under the threshold and `exp` is spared.
+#[inline(always)]
+fn touch(g: &Projected, cut: f32, dx: f32, dy: f32, cdy: f32, blend: Blend) -> Option<(f32, bool)> {
+    let power = -0.5 * (g.conic[0] * dx * dx + cdy) - g.conic[1] * dx * dy;
+    if !(cut..=0.0).contains(&power) {
+        return None;
     }
-    let [ca, cb, cc] = g.conic;
-    let [mx, my] = g.mean;
-    let cut = g.cutoff();
-    for j in ys {
-        let dy = (j as f32 + 0.5) - my;
-        let cdy = cc * dy * dy;
-        for i in g.row_span(dy, cut, &xs) {
-            let dx = (i as f32 + 0.5) - mx;
-            let power = -0.5 * (ca * dx * dx + cdy) - cb * dx * dy;
-            if !(cut..=0.0).contains(&power) {
-                continue;
-            }
-            let raw = g.opacity * power.exp();
-            let (alpha, capped) = if blend == Blend::Alpha && raw > ALPHA_MAX {
-                (ALPHA_MAX, true)
-            } else {
-                (raw, false)
-            };
-            if alpha >= ALPHA_MIN {
-                f(i, j, alpha, dx, dy, capped);
-            }
-        }
-    }
+    let raw = g.opacity * power.exp();
+    let (alpha, capped) = if blend == Blend::Alpha && raw > ALPHA_MAX {
+        (ALPHA_MAX, true)
+    } else {
+        (raw, false)
+    };
+    (alpha >= ALPHA_MIN).then_some((alpha, capped))
 }
 
 const TILE_PIXELS: usize = (TILE * TILE) as usize;
+
+/// Alphas of `g` along row `j` over columns `xs` (at most a tile wide), 0 where it does
+/// not touch. Computed apart from the accumulation that uses them, so that the `exp`
+/// call does not force every accumulator out of registers.
+#[inline(always)]
+fn row_alphas(
+    g: &Projected,
+    cut: f32,
+    j: u32,
+    xs: &Range<u32>,
+    blend: Blend,
+) -> (f32, [f32; TILE as usize]) {
+    let dy = (j as f32 + 0.5) - g.mean[1];
+    let cdy = g.conic[2] * dy * dy;
+    let mut alphas = [0f32; TILE as usize];
+    for (a, i) in alphas.iter_mut().zip(xs.clone()) {
+        if let Some((alpha, _)) = touch(g, cut, (i as f32 + 0.5) - g.mean[0], dy, cdy, blend) {
+            *a = alpha;
+        }
+    }
+    (dy, alphas)
+}
 
 /// Render `projected` and keep what the backward pass needs.
 pub fn forward(projected: &[Projected], blend: Blend, width: u32, height: u32) -> Forward {
     let tiles = Tiles::bin(projected, width, height);
     let alpha_mode = blend == Blend::Alpha;
+    if !alpha_mode {
+        // `sum` needs nothing but the image: the decoder's own renderer makes it.
+        let mut image = vec![0f32; (width * height * 3) as usize];
+        crate::render::render_projected(projected, blend, width, height, &mut image);
+        return Forward {
+            width,
+            height,
+            blend,
+            image,
+            tiles,
+            final_t: Vec::new(),
+            n_visited: Vec::new(),
+        };
+    }
     let per_tile = |t: usize| -> (
         [f32; TILE_PIXELS * 3],
         [f32; TILE_PIXELS],
@@ -168,24 +191,28 @@ pub fn forward(projected: &[Projected], blend: Blend, width: u32, height: u32) -
         let mut last = [0u32; TILE_PIXELS];
         for (pos, &k) in tiles.lists[t].iter().enumerate() {
             let g = &projected[k as usize];
-            for_each_pixel(g, rect, blend, |i, j, alpha, _, _, _| {
-                let p = rect.local(i, j);
-                if alpha_mode {
-                    let t = trans[p];
-                    if t < TRANSMITTANCE_MIN {
-                        return;
+            let Some((xs, ys)) = clip(g, rect) else {
+                continue;
+            };
+            let cut = g.cutoff();
+            let col = g.color;
+            for j in ys {
+                let (_, alphas) = row_alphas(g, cut, j, &xs, blend);
+                let l0 = rect.local(xs.start, j);
+                let px_row = acc[l0 * 3..(l0 + xs.len()) * 3].chunks_exact_mut(3);
+                let t_row = &mut trans[l0..l0 + xs.len()];
+                let n_row = &mut last[l0..l0 + xs.len()];
+                for (((px, t), n), &alpha) in px_row.zip(t_row).zip(n_row).zip(&alphas) {
+                    if alpha == 0.0 || *t < TRANSMITTANCE_MIN {
+                        continue;
                     }
-                    for ch in 0..3 {
-                        acc[p * 3 + ch] += g.color[ch] * alpha * t;
-                    }
-                    trans[p] = t * (1.0 - alpha);
-                    last[p] = pos as u32 + 1;
-                } else {
-                    for ch in 0..3 {
-                        acc[p * 3 + ch] += g.color[ch] * alpha;
-                    }
+                    px[0] += col[0] * alpha * *t;
+                    px[1] += col[1] * alpha * *t;
+                    px[2] += col[2] * alpha * *t;
+                    *t *= 1.0 - alpha;
+                    *n = pos as u32 + 1;
                 }
-            });
+            }
         }
         (acc, trans, last)
     };
@@ -200,14 +227,13 @@ pub fn forward(projected: &[Projected], blend: Blend, width: u32, height: u32) -
     let mut n_visited = vec![0u32; if alpha_mode { px } else { 0 }];
     for (t, (acc, trans, last)) in done.iter().enumerate() {
         let rect = Rect::of_tile(t, tiles.tiles_x, width, height);
+        let w = (rect.x1 - rect.x0) as usize;
         for j in rect.y0..rect.y1 {
-            for i in rect.x0..rect.x1 {
-                let (p, l) = ((j * width + i) as usize, rect.local(i, j));
-                image[p * 3..p * 3 + 3].copy_from_slice(&acc[l * 3..l * 3 + 3]);
-                if alpha_mode {
-                    final_t[p] = trans[l];
-                    n_visited[p] = last[l];
-                }
+            let (p, l) = ((j * width + rect.x0) as usize, rect.local(rect.x0, j));
+            image[p * 3..(p + w) * 3].copy_from_slice(&acc[l * 3..(l + w) * 3]);
+            if alpha_mode {
+                final_t[p..p + w].copy_from_slice(&trans[l..l + w]);
+                n_visited[p..p + w].copy_from_slice(&last[l..l + w]);
             }
         }
     }
@@ -258,18 +284,50 @@ pub fn backward(
         if blend == Blend::Sum {
             for (pos, &k) in list.iter().enumerate() {
                 let g = &projected[k as usize];
-                let mut s = ProjGrad::default();
-                for_each_pixel(g, rect, blend, |i, j, alpha, dx, dy, _| {
-                    let l = rect.local(i, j);
-                    let mut dl_dalpha = 0.0;
-                    for ch in 0..3 {
-                        s.color[ch] += alpha * d[l * 3 + ch];
-                        dl_dalpha += g.color[ch] * d[l * 3 + ch];
+                let Some((xs, ys)) = clip(g, rect) else {
+                    continue;
+                };
+                let cut = g.cutoff();
+                let mx = g.mean[0];
+                let col = g.color;
+                // Accumulators in locals, not behind a reference, so they stay in
+                // registers across the pixel loop.
+                let [ca, cb, cc] = g.conic;
+                let (mut c0, mut c1, mut c2) = (0f32, 0f32, 0f32);
+                let (mut gx, mut gy, mut ga, mut gb, mut gc, mut go) =
+                    (0f32, 0f32, 0f32, 0f32, 0f32, 0f32);
+                for j in ys {
+                    let (dy, alphas) = row_alphas(g, cut, j, &xs, blend);
+                    let l0 = rect.local(xs.start, j);
+                    let d_row = d[l0 * 3..(l0 + xs.len()) * 3].chunks_exact(3);
+                    for ((dd, &alpha), i) in d_row.zip(&alphas).zip(xs.clone()) {
+                        if alpha == 0.0 {
+                            continue;
+                        }
+                        c0 += alpha * dd[0];
+                        c1 += alpha * dd[1];
+                        c2 += alpha * dd[2];
+                        if all {
+                            // As in `geometry`, written out for the registers.
+                            let dx = (i as f32 + 0.5) - mx;
+                            let dl_dalpha = col[0] * dd[0] + col[1] * dd[1] + col[2] * dd[2];
+                            let dl_dpower = dl_dalpha * alpha;
+                            gx += dl_dpower * (ca * dx + cb * dy);
+                            gy += dl_dpower * (cc * dy + cb * dx);
+                            ga += dl_dpower * dx * dx;
+                            gb += dl_dpower * dx * dy;
+                            gc += dl_dpower * dy * dy;
+                            go += dl_dpower;
+                        }
                     }
-                    if all {
-                        geometry(&mut s, g, alpha, dl_dalpha, dx, dy);
-                    }
-                });
+                }
+                let s = ProjGrad {
+                    mean: [gx, gy],
+                    conic: [-0.5 * ga, -gb, -0.5 * gc],
+                    // d alpha / d o = alpha / o, so Σ dl_dalpha·alpha/o = (Σ dl_dpower)/o.
+                    opacity: go / g.opacity,
+                    color: [c0, c1, c2],
+                };
                 out[pos] = s;
             }
             return out;
@@ -279,11 +337,10 @@ pub fn backward(
         let mut trans = [1f32; TILE_PIXELS];
         let mut last = [0u32; TILE_PIXELS];
         for j in rect.y0..rect.y1 {
-            for i in rect.x0..rect.x1 {
-                let (p, l) = ((j * width + i) as usize, rect.local(i, j));
-                trans[l] = fwd.final_t[p];
-                last[l] = fwd.n_visited[p];
-            }
+            let w = (rect.x1 - rect.x0) as usize;
+            let (p, l) = ((j * width + rect.x0) as usize, rect.local(rect.x0, j));
+            trans[l..l + w].copy_from_slice(&fwd.final_t[p..p + w]);
+            last[l..l + w].copy_from_slice(&fwd.n_visited[p..p + w]);
         }
         let mut behind = [0f32; TILE_PIXELS * 3]; // colour composited behind, per unit T
         let mut prev_alpha = [0f32; TILE_PIXELS];
@@ -291,29 +348,40 @@ pub fn backward(
         let end = last.iter().copied().max().unwrap_or(0) as usize;
         for pos in (0..end).rev() {
             let g = &projected[list[pos] as usize];
+            let Some((xs, ys)) = clip(g, rect) else {
+                continue;
+            };
+            let cut = g.cutoff();
+            let mx = g.mean[0];
             let mut s = ProjGrad::default();
-            for_each_pixel(g, rect, blend, |i, j, alpha, dx, dy, capped| {
-                let l = rect.local(i, j);
-                if pos as u32 >= last[l] {
-                    return;
+            for j in ys {
+                let (dy, alphas) = row_alphas(g, cut, j, &xs, blend);
+                for (&alpha, i) in alphas.iter().zip(xs.clone()) {
+                    let l = rect.local(i, j);
+                    if alpha == 0.0 || pos as u32 >= last[l] {
+                        continue;
+                    }
+                    // A capped alpha does not move with the geometry.
+                    let capped = alpha >= ALPHA_MAX;
+                    let dx = (i as f32 + 0.5) - mx;
+                    let t = trans[l] / (1.0 - alpha);
+                    trans[l] = t;
+                    let mut dl_dalpha = 0.0;
+                    for ch in 0..3 {
+                        let b = prev_alpha[l] * prev_color[l * 3 + ch]
+                            + (1.0 - prev_alpha[l]) * behind[l * 3 + ch];
+                        behind[l * 3 + ch] = b;
+                        let dd = d[l * 3 + ch];
+                        s.color[ch] += alpha * t * dd;
+                        dl_dalpha += (g.color[ch] - b) * t * dd;
+                        prev_color[l * 3 + ch] = g.color[ch];
+                    }
+                    prev_alpha[l] = alpha;
+                    if all && !capped {
+                        geometry(&mut s, g, alpha, dl_dalpha, dx, dy);
+                    }
                 }
-                let t = trans[l] / (1.0 - alpha);
-                trans[l] = t;
-                let mut dl_dalpha = 0.0;
-                for ch in 0..3 {
-                    let b = prev_alpha[l] * prev_color[l * 3 + ch]
-                        + (1.0 - prev_alpha[l]) * behind[l * 3 + ch];
-                    behind[l * 3 + ch] = b;
-                    let dd = d[l * 3 + ch];
-                    s.color[ch] += alpha * t * dd;
-                    dl_dalpha += (g.color[ch] - b) * t * dd;
-                    prev_color[l * 3 + ch] = g.color[ch];
-                }
-                prev_alpha[l] = alpha;
-                if all && !capped {
-                    geometry(&mut s, g, alpha, dl_dalpha, dx, dy);
-                }
-            });
+            }
             out[pos] = s;
         }
         out

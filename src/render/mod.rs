@@ -22,8 +22,21 @@ mod tiles;
 
 pub use project::{project, project_scene, PixelBox, Projected};
 
+/// Render already-projected Gaussians into `out` (`width·height·3` floats, overwritten):
+/// the differentiable rasterizer shares this path so that fitting sees decoded pixels.
+#[cfg_attr(not(feature = "encode"), allow(dead_code))]
+pub(crate) fn render_projected(
+    proj: &[Projected],
+    blend: model::Blend,
+    width: u32,
+    height: u32,
+    out: &mut [f32],
+) {
+    cpu::render_projected(proj, blend, width, height, out, cfg!(feature = "parallel"));
+}
+
 use crate::format::{Error, ErrorKind, Limits, Result};
-use crate::model::Scene;
+use crate::model::{self, Scene};
 
 /// Floor of a pixel-space variance (px²). Keeps a Gaussian far below a pixel from
 /// having an infinite conic, and its determinant a normal float.

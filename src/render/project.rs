@@ -77,34 +77,6 @@ impl Projected {
     pub fn cutoff(&self) -> f32 {
         cutoff_of(self.opacity)
     }
-
-    /// The columns of `xs` on the row at vertical offset `dy` where `power` may reach
-    /// `cut` (from [`Projected::cutoff`]).
-    ///
-    /// Conservative: the row's quadratic `power(dx)` is solved in `f64` for the lower
-    /// level `cut - 1` and the roots are widened by a pixel, so every column left out has
-    /// an exact power below `cut - 1`. The `f32` evaluation of a pixel in the box errs by
-    /// far less than 1 (with `|B| < √(AC)`, the terms are at most a thousand times their
-    /// sum), so those columns would have been skipped anyway. For an elongated, rotated
-    /// Gaussian this leaves out most of its box.
-    #[inline]
-    pub fn row_span(&self, dy: f32, cut: f32, xs: &std::ops::Range<u32>) -> std::ops::Range<u32> {
-        let [a, b, c] = self.conic.map(f64::from);
-        let dy = f64::from(dy);
-        // power(dx) >= level  <=>  a dx² + 2 b dy dx + c dy² <= -2 level.
-        let k = -2.0 * (f64::from(cut) - 1.0);
-        let disc = k * a - (a * c - b * b) * dy * dy;
-        if disc.is_nan() || disc < 0.0 {
-            return xs.start..xs.start;
-        }
-        let half = disc.sqrt() / a;
-        // Pixel i has dx = i + 0.5 - mx.
-        let centre = f64::from(self.mean[0]) - 0.5 - b * dy / a;
-        let (s, e) = (f64::from(xs.start), f64::from(xs.end));
-        let lo = ((centre - half).floor() - 1.0).clamp(s, e) as u32;
-        let hi = ((centre + half).ceil() + 2.0).clamp(s, e) as u32;
-        lo..hi.max(lo)
-    }
 }
 
 /// [`Projected::cutoff`] for an opacity.

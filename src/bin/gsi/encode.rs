@@ -1,7 +1,7 @@
 //! `gsi encode`: fit Gaussians to an image and write a .gsi file.
 
 use crate::{io, Failure};
-use gsi::fit::{self, Budget, EncodeOptions, Init, Target};
+use gsi::fit::{self, Budget, EncodeOptions, Init, Loss, Target};
 use gsi::model::Blend;
 use std::io::{IsTerminal, Read};
 use std::path::{Path, PathBuf};
@@ -23,7 +23,7 @@ pub struct Args {
     #[arg(long, group = "budget")]
     target_psnr: Option<f32>,
     /// Optimizer iterations.
-    #[arg(long, default_value_t = 200)]
+    #[arg(long, default_value_t = 400)]
     iterations: u32,
     /// Initialization: content-adaptive, or the paper's random cold start.
     #[arg(long, value_enum, default_value_t = InitArg::Adaptive)]
@@ -31,6 +31,10 @@ pub struct Args {
     /// Blending: `sum` (GaussianImage) or `alpha` (front-to-back, paper Eq. 6-8).
     #[arg(long, value_enum, default_value_t = BlendArg::Sum)]
     blend: BlendArg,
+    /// Loss: `l2` (mean squared error, what PSNR measures) or `l1-ms-ssim`, the paper's
+    /// Eq. 9 with λ = 0.2.
+    #[arg(long, value_enum, default_value_t = LossArg::L2)]
+    loss: LossArg,
     /// Where to fit: `auto` uses the CPU (the GPU path is not built yet).
     #[arg(long, value_enum, default_value_t = DeviceArg::Auto)]
     device: DeviceArg,
@@ -46,6 +50,12 @@ pub struct Args {
 enum InitArg {
     Adaptive,
     Random,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum LossArg {
+    L2,
+    L1MsSsim,
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
@@ -128,6 +138,10 @@ pub fn run(args: Args) -> Result<(), Failure> {
             BlendArg::Alpha => Blend::Alpha,
         },
         seed: args.seed,
+        loss: match args.loss {
+            LossArg::L2 => Loss::L2,
+            LossArg::L1MsSsim => Loss::L1MsSsim { lambda: 0.2 },
+        },
         ..EncodeOptions::default()
     };
     let show = !args.quiet && std::io::stderr().is_terminal();
