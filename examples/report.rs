@@ -188,6 +188,8 @@ fn mean(v: impl Iterator<Item = f64>) -> f64 {
 
 fn main() {
     let args = parse_args();
+    // Stamp the commit the measured binary was built from, not the one at the end of the run.
+    let stamp = (machine(), commit());
     std::fs::create_dir_all(&args.out).expect("output folder");
     let mut rows = Vec::new();
     let sets: Vec<(&str, &PathBuf)> = [("kodak", &args.kodak), ("lol-high", &args.lol)]
@@ -249,7 +251,7 @@ fn main() {
         }
     }
     let curve = args.curve_image.as_ref().map(|p| init_curves(p, &args));
-    write_outputs(&args, &rows, curve.as_ref());
+    write_outputs(&args, &rows, curve.as_ref(), &stamp);
 }
 
 /// Curves of the adaptive and the random start on one image with the same N.
@@ -295,7 +297,7 @@ fn init_curves(path: &Path, args: &Args) -> Curves {
     }
 }
 
-fn write_outputs(args: &Args, rows: &[Row], curve: Option<&Curves>) {
+fn write_outputs(args: &Args, rows: &[Row], curve: Option<&Curves>, stamp: &(String, String)) {
     let json_rows: Vec<_> = rows
         .iter()
         .map(|r| {
@@ -311,7 +313,7 @@ fn write_outputs(args: &Args, rows: &[Row], curve: Option<&Curves>) {
         json!({"image": c.image, "gaussians": c.gaussians, "random": pts(&c.random), "random_psnr": c.random_psnr,
                "adaptive": pts(&c.adaptive), "adaptive_psnr": c.adaptive_psnr})
     });
-    let doc = json!({"machine": machine(), "commit": commit(), "iterations": args.iterations, "rows": json_rows, "init_curves": curve_json});
+    let doc = json!({"machine": stamp.0, "commit": stamp.1, "iterations": args.iterations, "rows": json_rows, "init_curves": curve_json});
     std::fs::write(
         args.out.join("encode.json"),
         serde_json::to_string_pretty(&doc).unwrap(),
@@ -322,7 +324,7 @@ fn write_outputs(args: &Args, rows: &[Row], curve: Option<&Curves>) {
     if let Some(c) = curve {
         plot_curves(c, &args.out.join("init_curves.svg"));
     }
-    let md = markdown(args, rows, curve);
+    let md = markdown(args, rows, curve, stamp);
     let bench = Path::new(env!("CARGO_MANIFEST_DIR")).join("BENCHMARKS.md");
     let old = std::fs::read_to_string(&bench).unwrap_or_default();
     let (start, end) = ("<!-- report:encode:start -->", "<!-- report:encode:end -->");
@@ -339,7 +341,7 @@ fn write_outputs(args: &Args, rows: &[Row], curve: Option<&Curves>) {
     );
 }
 
-fn markdown(args: &Args, rows: &[Row], curve: Option<&Curves>) -> String {
+fn markdown(args: &Args, rows: &[Row], curve: Option<&Curves>, stamp: &(String, String)) -> String {
     use std::fmt::Write;
     let mut s = String::new();
     let _ = writeln!(s, "## Stage-1 encoder: quality against size and time\n");
@@ -347,8 +349,8 @@ fn markdown(args: &Args, rows: &[Row], curve: Option<&Curves>) -> String {
         s,
         "Machine: {}. Commit: `{}`. Release build, CPU only, {} iterations, adaptive start, `sum` blending, \
          default bit depths. Regenerate with `cargo run --release --example report` (writes `{}/`).\n",
-        machine(),
-        commit(),
+        stamp.0,
+        stamp.1,
         args.iterations,
         args.out.display()
     );

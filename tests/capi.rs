@@ -5,18 +5,8 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-fn corpus(sub: &str) -> Vec<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("corpus")
-        .join(sub);
-    let mut v: Vec<_> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|e| e == "gsi"))
-        .collect();
-    v.sort();
-    v
-}
+mod common;
+use common::corpus;
 
 /// Build the static library the way a C user would (`cargo build --lib`): the test
 /// harness itself builds the crate as an rlib only. Returns the path of `libgsi.a`.

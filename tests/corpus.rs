@@ -11,15 +11,7 @@ fn corpus_dir(sub: &str) -> PathBuf {
         .join(sub)
 }
 
-fn gsi_files(sub: &str) -> Vec<PathBuf> {
-    let mut v: Vec<PathBuf> = std::fs::read_dir(corpus_dir(sub))
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|e| e == "gsi"))
-        .collect();
-    v.sort();
-    v
-}
+mod common;
 
 fn golden() -> BTreeMap<(String, String), String> {
     std::fs::read_to_string(corpus_dir("valid/golden.txt"))
@@ -36,7 +28,7 @@ fn golden() -> BTreeMap<(String, String), String> {
 #[test]
 fn valid_files_render_to_golden_pixels() {
     let golden = golden();
-    let files = gsi_files("valid");
+    let files = common::corpus("valid");
     assert!(files.len() >= 10, "corpus/valid has {} files", files.len());
     let mut checked = 0;
     for path in files {
@@ -69,7 +61,7 @@ fn valid_files_render_to_golden_pixels() {
 
 #[test]
 fn invalid_files_are_refused_with_their_kind() {
-    let files = gsi_files("invalid");
+    let files = common::corpus("invalid");
     assert!(
         files.len() >= 25,
         "corpus/invalid has {} files",

@@ -12,7 +12,7 @@
 //! depend on the number of threads.
 
 use crate::model::Blend;
-use crate::render::{Projected, ALPHA_MAX, ALPHA_MIN, TILE, TRANSMITTANCE_MIN};
+use crate::render::{Projected, Rect, ALPHA_MAX, ALPHA_MIN, TILE, TRANSMITTANCE_MIN};
 use std::ops::Range;
 
 #[cfg(feature = "parallel")]
@@ -84,15 +84,6 @@ pub struct Forward {
     n_visited: Vec<u32>,
 }
 
-/// Pixels of one tile: columns `x0..x1`, rows `y0..y1`, exclusive ends.
-#[derive(Clone, Copy)]
-struct Rect {
-    x0: u32,
-    x1: u32,
-    y0: u32,
-    y1: u32,
-}
-
 impl Rect {
     fn of_tile(t: usize, tiles_x: u32, width: u32, height: u32) -> Rect {
         let (tx, ty) = (t as u32 % tiles_x, t as u32 / tiles_x);
@@ -109,15 +100,6 @@ impl Rect {
     fn local(&self, i: u32, j: u32) -> usize {
         ((j - self.y0) * TILE + (i - self.x0)) as usize
     }
-}
-
-/// Columns and rows of `rect` inside the box of `g`; `None` when they do not meet.
-#[inline(always)]
-fn clip(g: &Projected, rect: Rect) -> Option<(Range<u32>, Range<u32>)> {
-    let b = &g.bbox;
-    let xs = b.x0.max(rect.x0)..(b.x1 + 1).min(rect.x1);
-    let ys = b.y0.max(rect.y0)..(b.y1 + 1).min(rect.y1);
-    (!xs.is_empty() && !ys.is_empty()).then_some((xs, ys))
 }
 
 /// The spec's per-pixel rule (§6.3) at offset `(dx, dy)`, with `cdy = C·dy²` hoisted out
@@ -191,7 +173,7 @@ pub fn forward(projected: &[Projected], blend: Blend, width: u32, height: u32) -
         let mut last = [0u32; TILE_PIXELS];
         for (pos, &k) in tiles.lists[t].iter().enumerate() {
             let g = &projected[k as usize];
-            let Some((xs, ys)) = clip(g, rect) else {
+            let Some((xs, ys)) = g.bbox.clip(rect) else {
                 continue;
             };
             let cut = g.cutoff();
@@ -284,7 +266,7 @@ pub fn backward(
         if blend == Blend::Sum {
             for (pos, &k) in list.iter().enumerate() {
                 let g = &projected[k as usize];
-                let Some((xs, ys)) = clip(g, rect) else {
+                let Some((xs, ys)) = g.bbox.clip(rect) else {
                     continue;
                 };
                 let cut = g.cutoff();
@@ -348,7 +330,7 @@ pub fn backward(
         let end = last.iter().copied().max().unwrap_or(0) as usize;
         for pos in (0..end).rev() {
             let g = &projected[list[pos] as usize];
-            let Some((xs, ys)) = clip(g, rect) else {
+            let Some((xs, ys)) = g.bbox.clip(rect) else {
                 continue;
             };
             let cut = g.cutoff();

@@ -7,7 +7,7 @@
 //! Gaussian's box. Which thread renders a band never changes the arithmetic, so the
 //! parallel and sequential builds give identical bits.
 
-use super::project::Projected;
+use super::project::{Projected, Rect};
 use super::tiles::{runs, Bins, Span};
 use super::{ALPHA_MAX, ALPHA_MIN, TILE, TRANSMITTANCE_MIN};
 use crate::model::Blend;
@@ -106,15 +106,6 @@ struct Band<'a> {
     tile_budget: u64,
 }
 
-/// A tile's pixels: columns `x0..x1`, rows `y0..y1` (exclusive ends).
-#[derive(Clone, Copy)]
-struct Rect {
-    x0: u32,
-    x1: u32,
-    y0: u32,
-    y1: u32,
-}
-
 impl Band<'_> {
     /// Render the Gaussians of `list` (indices into `proj`, stored order) into `rows`,
     /// the band's pixel rows.
@@ -159,7 +150,7 @@ impl Band<'_> {
         let mut power = [0.0f32; TILE as usize];
         for &k in list {
             let g = &self.proj[k as usize];
-            let Some((xs, ys)) = clip(g, rect) else {
+            let Some((xs, ys)) = g.bbox.clip(rect) else {
                 continue;
             };
             let (o, col) = (g.opacity, g.color);
@@ -198,7 +189,7 @@ impl Band<'_> {
         let mut live = ((rect.x1 - rect.x0) * (rect.y1 - rect.y0)) as usize;
         for &k in list {
             let g = &self.proj[k as usize];
-            let Some((xs, ys)) = clip(g, rect) else {
+            let Some((xs, ys)) = g.bbox.clip(rect) else {
                 continue;
             };
             let (o, col) = (g.opacity, g.color);
@@ -233,15 +224,6 @@ impl Band<'_> {
             }
         }
     }
-}
-
-/// Columns and rows of `rect` inside the box of `g` (non-empty for a binned Gaussian).
-#[inline]
-fn clip(g: &Projected, rect: Rect) -> Option<(Range<u32>, Range<u32>)> {
-    let b = &g.bbox;
-    let xs = b.x0.max(rect.x0)..(b.x1 + 1).min(rect.x1);
-    let ys = b.y0.max(rect.y0)..(b.y1 + 1).min(rect.y1);
-    (!xs.is_empty() && !ys.is_empty()).then_some((xs, ys))
 }
 
 /// `i as f32 + 0.5` for the columns `i` of a tile, computed once per tile.

@@ -20,6 +20,7 @@ mod cpu;
 mod project;
 mod tiles;
 
+pub(crate) use project::Rect;
 pub use project::{project, project_scene, PixelBox, Projected};
 
 /// Render already-projected Gaussians into `out` (`width·height·3` floats, overwritten):

@@ -15,7 +15,25 @@ pub struct PixelBox {
     pub y1: u32,
 }
 
+/// Pixels `x0..x1` × `y0..y1`, exclusive ends: a tile, or the part of one that a band
+/// of rows holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct Rect {
+    pub x0: u32,
+    pub x1: u32,
+    pub y0: u32,
+    pub y1: u32,
+}
+
 impl PixelBox {
+    /// Columns and rows of `rect` inside the box; `None` when they do not meet.
+    #[inline]
+    pub(crate) fn clip(&self, rect: Rect) -> Option<(std::ops::Range<u32>, std::ops::Range<u32>)> {
+        let xs = self.x0.max(rect.x0)..(self.x1 + 1).min(rect.x1);
+        let ys = self.y0.max(rect.y0)..(self.y1 + 1).min(rect.y1);
+        (!xs.is_empty() && !ys.is_empty()).then_some((xs, ys))
+    }
+
     /// Whether pixel `(i, j)` lies in the box.
     #[inline]
     pub fn contains(&self, i: u32, j: u32) -> bool {
