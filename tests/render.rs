@@ -42,7 +42,14 @@ fn naive(scene: &Scene, w: u32, h: u32) -> Vec<f32> {
             } else {
                 0.0
             };
-            let col = g.colors[n].map(|x| if x.is_finite() { x } else { 0.0 });
+            // Spec §6.2 step 5: colours are clamped to ±64, non-finite ones are 0.
+            let col = g.colors[n].map(|x| {
+                if x.is_finite() {
+                    x.clamp(-64.0, 64.0)
+                } else {
+                    0.0
+                }
+            });
             Some((conic, mx, my, (i0, i1, j0, j1), o, col))
         })
         .collect();

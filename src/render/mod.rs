@@ -20,6 +20,7 @@ mod cpu;
 mod project;
 mod tiles;
 
+#[cfg(feature = "encode")]
 pub(crate) use project::Rect;
 pub use project::{project, project_scene, PixelBox, Projected};
 
@@ -55,6 +56,10 @@ pub const ALPHA_MIN: f32 = 1.0 / 255.0;
 pub const ALPHA_MAX: f32 = 0.99;
 /// In `alpha` blending a pixel stops once its transmittance falls below this.
 pub const TRANSMITTANCE_MIN: f32 = 1e-4;
+/// Colours are clamped to `±COLOR_MAX` before blending. A `sum` of fewer than 2^32
+/// Gaussians with alpha ≤ 1 then stays below 2^38, so no file can make a pixel infinite; displayable
+/// colours are in `[0, 1]` and fitted ones stay within a few units.
+pub const COLOR_MAX: f32 = 64.0;
 /// Side of a square tile, in pixels.
 pub const TILE: u32 = 16;
 

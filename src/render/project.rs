@@ -3,7 +3,7 @@
 //! Every renderer starts here, so that the clamps, the conic and the pixel box, which
 //! decide which pixels a Gaussian may touch, are computed once and the same way.
 
-use super::{ALPHA_MAX, ALPHA_MIN, CORRELATION_MAX, EXTENT_SIGMAS, VAR_MAX, VAR_MIN};
+use super::{ALPHA_MAX, ALPHA_MIN, COLOR_MAX, CORRELATION_MAX, EXTENT_SIGMAS, VAR_MAX, VAR_MIN};
 use crate::model::{Blend, Scene};
 
 /// Inclusive range of pixel columns `x0..=x1` and rows `y0..=y1`; never empty.
@@ -52,7 +52,7 @@ pub struct Projected {
     pub conic: [f32; 3],
     /// Opacity in `[ALPHA_MIN, 1]` (a Gaussian below `ALPHA_MIN` is never projected).
     pub opacity: f32,
-    /// Colour as stored, with non-finite components replaced by 0.
+    /// Colour as stored, clamped to `±COLOR_MAX`, non-finite components replaced by 0.
     pub color: [f32; 3],
     /// Pixels whose centre lies within `EXTENT_SIGMAS` standard deviations along x and y,
     /// clipped to the image. No pixel outside it is ever touched.
@@ -152,7 +152,13 @@ pub fn project(scene: &Scene, index: usize, width: u32, height: u32) -> Option<P
     if opacity < ALPHA_MIN {
         return None;
     }
-    let color = g.colors[index].map(|x| if x.is_finite() { x } else { 0.0 });
+    let color = g.colors[index].map(|x| {
+        if x.is_finite() {
+            x.clamp(-COLOR_MAX, COLOR_MAX)
+        } else {
+            0.0
+        }
+    });
 
     Some(Projected {
         index,

@@ -1,0 +1,142 @@
+//! Writes the seed inputs under `fuzz/seeds/`: a handful of small valid files covering
+//! both blend modes, both covariance parameterizations, opacity or none, 0..=24-bit
+//! quantizers, stored and zstd payloads, `gCRM` or none, and an unknown ancillary chunk.
+//!
+//! `cargo run --manifest-path fuzz/Cargo.toml --example gen_seeds [OUT_DIR]`
+//!
+//! `parse/` gets the files as they are; `decode/` gets each with a two-byte prefix that
+//! the `decode` target reads as its output size.
+
+use gsi::format::{to_bytes, BitDepths, ChunkType, RawChunk, Records, WriteOptions};
+use gsi::model::{Blend, CovParam, GaussianSet, Scene};
+use gsi::synth::{random_scene, SceneSpec};
+use std::path::PathBuf;
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let out = std::env::args_os()
+        .nth(1)
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("seeds"));
+    let (parse_dir, decode_dir) = (out.join("parse"), out.join("decode"));
+    std::fs::create_dir_all(&parse_dir)?;
+    std::fs::create_dir_all(&decode_dir)?;
+
+    let mut seeds: Vec<(String, Vec<u8>)> =
+        vec![("tiny".into(), gsi::format::tests_support::tiny_file())];
+    const DEFAULT: BitDepths = BitDepths {
+        position: 16,
+        covariance: 12,
+        color: 8,
+        opacity: 8,
+    };
+    const ODD: BitDepths = BitDepths {
+        position: 3,
+        covariance: 5,
+        color: 7,
+        opacity: 1,
+    };
+    const WIDE: BitDepths = BitDepths {
+        position: 24,
+        covariance: 24,
+        color: 24,
+        opacity: 24,
+    };
+    const NONE: BitDepths = BitDepths {
+        position: 0,
+        covariance: 0,
+        color: 0,
+        opacity: 0,
+    };
+    use Blend::{Alpha, Sum};
+    use CovParam::{Cholesky as Chol, LogScaleRotation as Lsr};
+    // name, width, height, count, blend, covariance, opacity, bits
+    type Case = (
+        &'static str,
+        u32,
+        u32,
+        usize,
+        Blend,
+        CovParam,
+        bool,
+        BitDepths,
+    );
+    #[rustfmt::skip]
+    let cases: &[Case] = &[
+        ("empty",       8,  8,  0, Sum,   Chol, false, DEFAULT),
+        ("one",         1,  1,  1, Alpha, Lsr,  true,  DEFAULT),
+        ("sum-chol",   32, 24, 12, Sum,   Chol, false, DEFAULT),
+        ("sum-lsr",    24, 32, 12, Sum,   Lsr,  false, DEFAULT),
+        ("alpha-lsr",  48, 48, 30, Alpha, Lsr,  true,  DEFAULT),
+        ("alpha-chol", 40, 30, 20, Alpha, Chol, true,  DEFAULT),
+        ("bits-odd",   16, 16,  9, Alpha, Chol, true,  ODD),
+        ("bits-24",    16, 16,  6, Sum,   Lsr,  false, WIDE),
+        ("bits-0",     16, 16,  6, Alpha, Lsr,  true,  NONE),
+    ];
+    for (i, &(name, w, h, n, blend, cov_param, with_opacity, bits)) in cases.iter().enumerate() {
+        let mut spec = SceneSpec::new(w, h, n, blend);
+        spec.cov_param = cov_param;
+        spec.with_opacity = with_opacity;
+        let records = Records::from_scene(&random_scene(0x5eed + i as u64, spec), bits);
+        let mut opts = WriteOptions {
+            zstd_level: 3,
+            ..WriteOptions::default()
+        };
+        match i % 3 {
+            0 => opts.settings = None,
+            1 => {
+                opts.settings = Some(format!("seed={i}\nbits={bits:?}"));
+                opts.psnr = Some(31.5);
+            }
+            _ => opts.ancillary.push(RawChunk {
+                ty: ChunkType(*b"gTST"),
+                data: b"unknown ancillary".to_vec(),
+            }),
+        }
+        seeds.push((name.into(), to_bytes(&records, &opts)?));
+    }
+
+    // A regular grid of near-identical Gaussians compresses, so its payloads are zstd.
+    let n = 16;
+    let grid = Scene {
+        width: 64,
+        height: 64,
+        blend: Blend::Alpha,
+        cov_param: CovParam::LogScaleRotation,
+        gaussians: GaussianSet {
+            positions: (0..n * n)
+                .map(|i| [(i % n) as f32 / n as f32, (i / n) as f32 / n as f32])
+                .collect(),
+            cov: (0..n * n)
+                .map(|i| [-4.0, -4.0 - (i % 2) as f32, 0.0])
+                .collect(),
+            colors: (0..n * n)
+                .map(|i| [(i % 4) as f32 / 3.0, 0.5, 1.0 - (i % 2) as f32])
+                .collect(),
+            opacity: Some(
+                (0..n * n)
+                    .map(|i| if i % 3 == 0 { 0.5 } else { 1.0 })
+                    .collect(),
+            ),
+        },
+    };
+    let opts = WriteOptions {
+        zstd_level: 3,
+        ..WriteOptions::default()
+    };
+    seeds.push((
+        "zstd".into(),
+        to_bytes(&Records::from_scene(&grid, BitDepths::default()), &opts)?,
+    ));
+
+    for (i, (name, bytes)) in seeds.iter().enumerate() {
+        std::fs::write(parse_dir.join(format!("{name}.gsi")), bytes)?;
+        // Output sizes from 1x1 up to 64x64, varied across seeds.
+        let size = [(i * 7 % 64) as u8, (i * 13 % 64) as u8];
+        std::fs::write(
+            decode_dir.join(format!("{name}.bin")),
+            [&size[..], bytes].concat(),
+        )?;
+    }
+    println!("{} seeds in {}", seeds.len(), out.display());
+    Ok(())
+}

@@ -1,0 +1,36 @@
+//! Any bytes through the container decoder: `Ok` or `Err`, never a panic, never more
+//! than the limits allow. A valid file must also survive re-encoding unchanged.
+
+#![no_main]
+
+mod common;
+
+use gsi::format::{read_file, to_bytes, WriteOptions};
+use libfuzzer_sys::fuzz_target;
+
+fuzz_target!(|data: &[u8]| {
+    let Some(file) = common::parse_deep(data) else {
+        return;
+    };
+
+    // Whatever the decoder accepts, the encoder writes back to the same records (codes,
+    // quantizers, header fields) and ancillary chunks. A fast zstd level keeps runs quick.
+    let opts = WriteOptions {
+        zstd_level: 1,
+        psnr: None,
+        settings: None,
+        ancillary: file.ancillary.clone(),
+    };
+    let bytes = to_bytes(&file.records, &opts).expect("re-encoding a parsed file");
+    let again = read_file(&bytes[..], gsi::format::Limits::unlimited())
+        .expect("re-reading a re-encoded file");
+    assert_eq!(
+        again.records, file.records,
+        "records change through a re-encode"
+    );
+    assert_eq!(
+        again.ancillary, file.ancillary,
+        "ancillary chunks change through a re-encode"
+    );
+    assert_eq!(again.file_bytes, bytes.len() as u64);
+});
