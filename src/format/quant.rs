@@ -9,8 +9,9 @@ pub const MAX_BITS: u8 = 24;
 
 /// One component's quantizer: `bits`-bit codes spread uniformly over `[min, max]`.
 ///
-/// Dequantization is `min + (max − min) · q / (2^bits − 1)`, evaluated in `f64` and
-/// rounded once to `f32`, so every decoder gets the same value bit for bit. With
+/// Dequantization is `min·(1 − t) + max·t` with `t = q / (2^bits − 1)`, clamped to
+/// `[min, max]`, evaluated in `f64` and rounded once to `f32`, so every decoder gets the
+/// same value bit for bit and no code leaves the range. With
 /// `bits = 0` the component is the constant `min` and occupies no bits.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Quantizer {
@@ -87,8 +88,11 @@ impl Quantizer {
         if self.bits == 0 {
             return self.min;
         }
+        // Interpolating between the ends (rather than `lo + (hi − lo)·t`) keeps both ends
+        // exact and every value inside the range, even when `hi − lo` dwarfs `hi`.
         let (lo, hi) = (f64::from(self.min), f64::from(self.max));
-        (lo + (hi - lo) * f64::from(q) / f64::from(self.max_code())) as f32
+        let t = f64::from(q) / f64::from(self.max_code());
+        (lo * (1.0 - t) + hi * t).clamp(lo, hi) as f32
     }
 
     /// Nearest code for `x`; values outside the range clamp to its ends, NaN maps to 0.
