@@ -26,12 +26,10 @@ fn wild() -> impl Strategy<Value = f32> {
     ]
 }
 
-fn scene(
-    blend: Blend,
-    cov_param: CovParam,
-    g: Vec<([f32; 2], [f32; 3], [f32; 3], f32)>,
-    opacity: bool,
-) -> Scene {
+/// One Gaussian: position, covariance parameters, colour, opacity.
+type Raw = ([f32; 2], [f32; 3], [f32; 3], f32);
+
+fn scene(blend: Blend, cov_param: CovParam, g: Vec<Raw>, opacity: bool) -> Scene {
     Scene {
         width: 17,
         height: 11,
@@ -46,7 +44,7 @@ fn scene(
     }
 }
 
-fn gaussian() -> impl Strategy<Value = ([f32; 2], [f32; 3], [f32; 3], f32)> {
+fn gaussian() -> impl Strategy<Value = Raw> {
     (
         [wild(), wild()],
         [wild(), wild(), wild()],
