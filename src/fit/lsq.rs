@@ -26,13 +26,12 @@ pub fn solve_colors(
     iterations: usize,
 ) -> Vec<[f32; 3]> {
     let n = projected.len();
-    let apply = |proj: &mut [Projected], c: &[[f32; 3]]| -> (raster::Forward, Vec<f32>) {
+    // A c: the forward pass with the colours `c` (its `image` is the product).
+    let apply = |proj: &mut [Projected], c: &[[f32; 3]]| -> raster::Forward {
         for (g, c) in proj.iter_mut().zip(c) {
             g.color = *c;
         }
-        let f = raster::forward(proj, blend, width, height);
-        let img = f.image.clone();
-        (f, img)
+        raster::forward(proj, blend, width, height)
     };
     // Aᵀ r, reusing the binning of the forward pass that produced `f`.
     let adjoint = |f: &raster::Forward, proj: &[Projected], r: &[f32]| -> Vec<[f32; 3]> {
@@ -43,8 +42,8 @@ pub fn solve_colors(
     };
     let mut x: Vec<[f32; 3]> = projected.iter().map(|g| g.color).collect();
     // r = Aᵀ(y − A x) − ε x
-    let (f, ax) = apply(projected, &x);
-    let resid: Vec<f32> = target.iter().zip(&ax).map(|(y, a)| y - a).collect();
+    let f = apply(projected, &x);
+    let resid: Vec<f32> = target.iter().zip(&f.image).map(|(y, a)| y - a).collect();
     let mut r = adjoint(&f, projected, &resid);
     for (ri, xi) in r.iter_mut().zip(&x) {
         for ch in 0..3 {
@@ -67,8 +66,8 @@ pub fn solve_colors(
             break;
         }
         // q = (AᵀA + ε) p, per channel.
-        let (f, ap) = apply(projected, &p);
-        let mut q = adjoint(&f, projected, &ap);
+        let f = apply(projected, &p);
+        let mut q = adjoint(&f, projected, &f.image);
         for (qi, pi) in q.iter_mut().zip(&p) {
             for ch in 0..3 {
                 qi[ch] += RIDGE * pi[ch];
