@@ -108,6 +108,15 @@ impl GaussianSet {
         self.opacity.as_ref().map_or(1.0, |o| o[i])
     }
 
+    /// True when every stored number (positions, covariance parameters, colours,
+    /// opacities) is finite: what every stage guarantees of what it hands on.
+    pub fn all_finite(&self) -> bool {
+        self.positions.iter().flatten().all(|x| x.is_finite())
+            && self.cov.iter().flatten().all(|x| x.is_finite())
+            && self.colors.iter().flatten().all(|x| x.is_finite())
+            && self.opacity.iter().flatten().all(|x| x.is_finite())
+    }
+
     /// True when every attribute vector has the same length.
     pub fn is_consistent(&self) -> bool {
         let n = self.len();

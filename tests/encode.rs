@@ -5,19 +5,8 @@ use gsi::fit::{encode, Budget, EncodeOptions, Init, Target};
 use gsi::format::{read_file, Limits};
 use gsi::model::Blend;
 
-fn image(w: u32, h: u32, f: impl Fn(u32, u32) -> [f32; 3]) -> Target {
-    let mut data = Vec::with_capacity((w * h * 3) as usize);
-    for y in 0..h {
-        for x in 0..w {
-            data.extend(f(x, y));
-        }
-    }
-    Target {
-        width: w,
-        height: h,
-        data,
-    }
-}
+mod common;
+use common::image;
 
 /// A smooth gradient with a disc and a bar: something with edges and flat parts.
 fn scene_like(w: u32, h: u32) -> Target {
@@ -50,14 +39,7 @@ fn decodes(bytes: &[u8], t: &Target) -> gsi::render::RgbImage {
         (t.width, t.height)
     );
     let scene = f.records.to_scene();
-    let g = &scene.gaussians;
-    assert!(g
-        .positions
-        .iter()
-        .flatten()
-        .chain(g.cov.iter().flatten())
-        .chain(g.colors.iter().flatten())
-        .all(|v| v.is_finite()));
+    assert!(scene.gaussians.all_finite());
     let img = gsi::render::render(&scene, t.width, t.height).unwrap();
     assert!(img.data.iter().all(|v| v.is_finite()));
     img

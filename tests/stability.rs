@@ -9,6 +9,8 @@ use gsi::model::{Blend, CovParam, GaussianSet, Scene};
 use gsi::render::{render, COLOR_MAX};
 use proptest::prelude::*;
 
+mod common;
+
 /// Any `f32`, with the awkward ones (0, ±∞, NaN, extremes, subnormals) made likely.
 fn wild() -> impl Strategy<Value = f32> {
     prop_oneof![
@@ -119,7 +121,7 @@ proptest! {
         prop_assert_eq!(&file.records, &records);
         let scene = file.records.to_scene();
         let g = &scene.gaussians;
-        prop_assert!(g.positions.iter().flatten().chain(g.cov.iter().flatten()).chain(g.colors.iter().flatten()).all(|v| v.is_finite()));
+        prop_assert!(g.all_finite());
         for (w, h) in [(9, 7), (1, 1), (30, 2)] {
             prop_assert!(render(&scene, w, h).unwrap().data.iter().all(|v| v.is_finite()));
         }
@@ -145,17 +147,7 @@ mod fitting {
     use gsi::fit::{encode, Budget, EncodeOptions, Init, LearningRates, Loss, Target};
     use gsi::model::Blend;
 
-    fn target(w: u32, h: u32, f: impl Fn(u32, u32) -> [f32; 3]) -> Target {
-        let f = &f;
-        let data = (0..h)
-            .flat_map(|y| (0..w).flat_map(move |x| f(x, y)))
-            .collect();
-        Target {
-            width: w,
-            height: h,
-            data,
-        }
-    }
+    use super::common::image as target;
 
     fn textured(w: u32, h: u32) -> Target {
         target(w, h, |x, y| {

@@ -244,13 +244,7 @@ mod tests {
             for init in [Init::Adaptive, Init::Random] {
                 let g = initialize(&t, 12, init, Blend::Alpha, 1);
                 assert_eq!(g.len(), 12);
-                assert!(g
-                    .positions
-                    .iter()
-                    .flatten()
-                    .chain(g.cov.iter().flatten())
-                    .chain(g.colors.iter().flatten())
-                    .all(|x| x.is_finite()));
+                assert!(g.all_finite());
             }
         }
     }

@@ -16,3 +16,17 @@ pub fn corpus(sub: &str) -> Vec<PathBuf> {
     v.sort();
     v
 }
+
+/// A `w × h` RGB image in `[0, 1]` with `f(x, y)` at each pixel.
+#[cfg(feature = "encode")]
+pub fn image(w: u32, h: u32, f: impl Fn(u32, u32) -> [f32; 3]) -> gsi::fit::Target {
+    let data = (0..h)
+        .flat_map(|y| (0..w).map(move |x| (x, y)))
+        .flat_map(|(x, y)| f(x, y))
+        .collect();
+    gsi::fit::Target {
+        width: w,
+        height: h,
+        data,
+    }
+}
