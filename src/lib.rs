@@ -66,6 +66,7 @@
 //! From C, the same decoder is `include/gsi.h` (feature `capi`, in the staticlib and
 //! cdylib); `examples/c/decode.c` shows its use.
 
+pub mod enhance;
 #[cfg(feature = "encode")]
 pub mod fit;
 pub mod format;

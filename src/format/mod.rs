@@ -4,6 +4,8 @@
 //! handled here; section numbers in comments refer to it.
 
 mod chunk;
+mod edit;
+mod enhancer;
 mod error;
 mod header;
 mod limits;
@@ -14,6 +16,10 @@ mod records;
 mod writer;
 
 pub use chunk::{chunk_crc, ChunkInfo, ChunkType, RawChunk, SIGNATURE};
+pub use edit::ChunkedFile;
+pub use enhancer::{
+    tensor_sizes, EnhancerRecord, FitSettings, OriginalColors, MAX_EXPERTS, MAX_HIDDEN, TENSORS,
+};
 pub use error::{Error, ErrorKind, Result};
 pub use header::{ColorSpace, Header, FLAG_IMPORTANCE_ORDERED, VERSION_MAJOR, VERSION_MINOR};
 pub use limits::Limits;

@@ -94,6 +94,17 @@ impl Attribute {
         Ok(out)
     }
 
+    /// [`parse`](Self::parse) with its own allocation budget, for a payload found outside
+    /// the normal chunk sequence (inside `gORC`).
+    pub(crate) fn parse_standalone(
+        p: &[u8],
+        components: usize,
+        count: u32,
+        limits: &Limits,
+    ) -> Result<Attribute> {
+        Self::parse(p, components, count, limits, &mut AllocBudget::new(limits))
+    }
+
     /// Parse an attribute chunk payload holding `count` records of `components` components.
     /// Sizes are checked against `limits` and `budget` before anything is allocated.
     pub(crate) fn parse(

@@ -4,6 +4,7 @@
 mod compare;
 mod decode;
 mod encode;
+mod enhance;
 mod info;
 mod io;
 
@@ -25,6 +26,8 @@ struct Cli {
 enum Command {
     /// Fit Gaussians to an image and write a .gsi file.
     Encode(encode::Args),
+    /// Brighten a low-light .gsi file in place of its colours (zero-shot, no reference).
+    Enhance(enhance::Args),
     /// Describe a .gsi file: size, Gaussians, compression figures, chunks.
     Info(info::Args),
     /// Render a .gsi file to PNG or JPEG at any size.
@@ -46,6 +49,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Encode(a) => encode::run(a),
+        Command::Enhance(a) => enhance::run(a),
         Command::Info(a) => info::run(a),
         Command::Decode(a) => decode::run(a),
         Command::Compare(a) => compare::run(a),

@@ -1,0 +1,183 @@
+//! `gsi enhance`: zero-shot low-light enhancement of a .gsi file's colours, in the file.
+
+use crate::encode::DeviceArg;
+use crate::{io, Failure};
+use gsi::enhance::fit::{scene_luma, EnhanceOptions};
+use gsi::enhance::{self, LOW_LIGHT_LUMA};
+use gsi::format::{ChunkType, ChunkedFile, Limits};
+use std::io::{IsTerminal, Read};
+use std::path::{Path, PathBuf};
+
+#[derive(clap::Args)]
+#[command(group(clap::ArgGroup::new("dest").required(true).args(["in_place", "output"])))]
+#[command(group(clap::ArgGroup::new("mode").args(["revert", "apply_from"])))]
+pub struct Args {
+    /// The .gsi file to enhance (`-` reads standard input).
+    input: PathBuf,
+    /// Replace the input file (through a synced temporary file in the same folder).
+    #[arg(long)]
+    in_place: bool,
+    /// Write the result here instead (`-` for standard output).
+    #[arg(short, long)]
+    output: Option<PathBuf>,
+    /// Optimizer iterations of the fit.
+    #[arg(long, default_value_t = EnhanceOptions::default().iterations)]
+    iterations: u32,
+    /// Target mean brightness E of the exposure loss (paper Eq. 17), in (0, 1).
+    #[arg(long, default_value_t = EnhanceOptions::default().params.exposure_target)]
+    exposure: f32,
+    /// Number of colour operators K, the identity included (paper: 16).
+    #[arg(long, default_value_t = EnhanceOptions::default().experts)]
+    experts: usize,
+    /// Where to fit: `auto` uses the CPU (the GPU path is not built yet).
+    #[arg(long, value_enum, default_value_t = DeviceArg::Auto)]
+    device: DeviceArg,
+    /// Enhance even an image that is not low-light, or one enhanced before whose
+    /// original colours were discarded.
+    #[arg(long)]
+    force: bool,
+    /// Undo an earlier enhancement, restoring the file byte for byte.
+    #[arg(long)]
+    revert: bool,
+    /// Apply the enhancer stored in this file instead of fitting one.
+    #[arg(long, value_name = "SOURCE.gsi")]
+    apply_from: Option<PathBuf>,
+    /// Do not keep the original colours (smaller file; --revert becomes impossible).
+    #[arg(long, conflicts_with = "revert")]
+    discard_original: bool,
+    /// Seed of the fit's initialization.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// No progress bar and no summary line.
+    #[arg(long)]
+    quiet: bool,
+}
+
+fn read_all(path: &Path) -> Result<Vec<u8>, Failure> {
+    let mut bytes = Vec::new();
+    io::open_input(path)
+        .and_then(|mut r| r.read_to_end(&mut bytes))
+        .map_err(|e| Failure(format!("{}: {e}", path.display())))?;
+    Ok(bytes)
+}
+
+fn parse(path: &Path, bytes: &[u8]) -> Result<ChunkedFile, Failure> {
+    ChunkedFile::parse(bytes, Limits::default())
+        .map_err(|e| Failure(format!("{}: {e}", path.display())))
+}
+
+pub fn run(args: Args) -> Result<(), Failure> {
+    if args.in_place && args.input == Path::new("-") {
+        return Err(Failure(
+            "--in-place needs a file, not standard input".into(),
+        ));
+    }
+    if args.device == DeviceArg::Gpu {
+        return Err(Failure(
+            "--device gpu: this build has no GPU enhancement path; use --device cpu".into(),
+        ));
+    }
+    if args.iterations == 0 {
+        return Err(Failure("--iterations must be at least 1".into()));
+    }
+    if !(args.exposure > 0.0 && args.exposure < 1.0) {
+        return Err(Failure(format!(
+            "--exposure {} must be in (0, 1)",
+            args.exposure
+        )));
+    }
+    if !(1..=64).contains(&args.experts) {
+        return Err(Failure(format!(
+            "--experts {} must be in 1..=64",
+            args.experts
+        )));
+    }
+    let dest = args.output.clone().unwrap_or_else(|| args.input.clone());
+    let named = |e: gsi::format::Error| Failure(format!("{}: {e}", args.input.display()));
+    let limits = Limits::default();
+    let bytes = read_all(&args.input)?;
+    let file = parse(&args.input, &bytes)?;
+    let keep = !args.discard_original;
+    let say = |msg: String| {
+        if !args.quiet {
+            eprintln!("{msg}");
+        }
+    };
+
+    let out = if args.revert {
+        file.revert().map_err(named)?
+    } else if let Some(src) = &args.apply_from {
+        let source = parse(src, &read_all(src)?)?;
+        enhance::apply_from(&file, &source, keep, &limits).map_err(named)?
+    } else {
+        let enhanced_before = file.chunks.iter().any(|c| c.ty == ChunkType::ENHANCER);
+        if enhanced_before && file.original().map_err(named)?.is_none() && !args.force {
+            return Err(Failure(format!(
+                "{}: already enhanced and its original colours were discarded; --force enhances the enhanced colours again",
+                args.input.display()
+            )));
+        }
+        let opts = EnhanceOptions {
+            iterations: args.iterations,
+            experts: args.experts,
+            seed: args.seed,
+            params: gsi::enhance::loss::LossParams {
+                exposure_target: args.exposure,
+                ..EnhanceOptions::default().params
+            },
+            ..EnhanceOptions::default()
+        };
+        let scene = enhance::base_scene(&file, &limits).map_err(named)?;
+        let luma = scene_luma(&scene, opts.work_side);
+        if luma > LOW_LIGHT_LUMA && !args.force {
+            say(format!(
+                "{}: mean luma {luma:.3} is above {LOW_LIGHT_LUMA}: not a low-light image, left unchanged (--force enhances it anyway)",
+                args.input.display()
+            ));
+            if args.output.is_some() {
+                write(&dest, &bytes)?;
+            }
+            return Ok(());
+        }
+        let show = !args.quiet && std::io::stderr().is_terminal();
+        let bar = indicatif::ProgressBar::new(u64::from(args.iterations));
+        if show {
+            bar.set_style(
+                indicatif::ProgressStyle::with_template(
+                    "{bar:30} {pos}/{len} it  {msg}  ETA {eta}",
+                )
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+            );
+        } else {
+            bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
+        }
+        let start = std::time::Instant::now();
+        let (out, fitted) = enhance::enhance(&file, &opts, keep, &limits, &mut |p| {
+            bar.set_position(u64::from(p.iteration));
+            if std::env::var_os("GSI_TRACE").is_some() && p.iteration % 50 == 0 {
+                eprintln!("{} {:?} {:?}", p.iteration, p.terms, p.map);
+            }
+            if p.iteration % 10 == 0 {
+                bar.set_message(format!("loss {:.3}", p.terms.total));
+            }
+        })
+        .map_err(named)?;
+        bar.finish_and_clear();
+        say(format!(
+            "enhanced: mean luma {:.3} -> {:.3}, K {}, {} iterations, {:.1} s",
+            fitted.mean_luma.0,
+            fitted.mean_luma.1,
+            opts.experts,
+            opts.iterations,
+            start.elapsed().as_secs_f64()
+        ));
+        out
+    };
+    write(&dest, &out)?;
+    say(format!("{}: {} bytes", dest.display(), out.len()));
+    Ok(())
+}
+
+fn write(dest: &Path, bytes: &[u8]) -> Result<(), Failure> {
+    io::write_output(dest, bytes).map_err(|e| Failure(format!("{}: {e}", dest.display())))
+}

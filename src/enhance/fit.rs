@@ -1,0 +1,777 @@
+//! Fitting an enhancer to one image, zero-shot (paper §III-B): no reference, no
+//! training data, only the no-reference losses of [`super::loss`] on the image the
+//! enhanced Gaussians render.
+//!
+//! Everything is optimized at a reduced working size (long side
+//! [`EnhanceOptions::work_side`]): the losses are statistics of brightness, colour and
+//! edges, which a 256-pixel rendering estimates as well as a full-size one, and the
+//! frozen-geometry render `A·c` ([`ColorOperator`]) makes each iteration cost a sparse
+//! product rather than a rasterization.
+
+use super::features::Backbone;
+use super::loss::{map_regularizers, ImageLoss, ImageTerms, LossParams, LossWeights, MapTerms};
+use super::mixture::{clamp_for, tap, Enhancer, MapTap};
+use super::operator::ColorOperator;
+use crate::format::{EnhancerRecord, FitSettings, MAX_EXPERTS};
+use crate::model::Scene;
+use crate::synth::SplitMix64;
+
+/// How an enhancer is fitted. The defaults are the paper's where it gives them (K = 16,
+/// the loss weights, E = 0.7) and measured choices elsewhere (see BENCHMARKS.md).
+#[derive(Clone, Debug)]
+pub struct EnhanceOptions {
+    pub iterations: u32,
+    /// K, operators including the identity.
+    pub experts: usize,
+    /// Width of the operators' two hidden layers.
+    pub hidden: usize,
+    /// Width of the weight-map head's hidden layer.
+    pub head_hidden: usize,
+    /// Long side of the working image, in pixels.
+    pub work_side: u32,
+    /// Side of a weight-map cell, in working pixels.
+    pub cell: u32,
+    /// Adam's initial step; it decays on a cosine to 1 % of this.
+    pub learning_rate: f32,
+    pub weights: LossWeights,
+    pub params: LossParams,
+    pub seed: u64,
+}
+
+impl Default for EnhanceOptions {
+    fn default() -> Self {
+        EnhanceOptions {
+            iterations: 600,
+            experts: 16,
+            hidden: 8,
+            head_hidden: 16,
+            work_side: 256,
+            cell: 8,
+            learning_rate: 5e-3,
+            weights: LossWeights::default(),
+            params: LossParams::default(),
+            seed: 0,
+        }
+    }
+}
+
+/// Reported every iteration.
+#[derive(Clone, Copy, Debug)]
+pub struct Progress {
+    pub iteration: u32,
+    pub iterations: u32,
+    pub terms: ImageTerms,
+    pub map: MapTerms,
+}
+
+/// A fitted enhancer and what it did.
+#[derive(Clone, Debug)]
+pub struct Fitted {
+    /// The stored (quantized) enhancer.
+    pub record: EnhancerRecord,
+    /// [`Enhancer::from_record`] of `record`: the one whose output was kept.
+    pub enhancer: Enhancer,
+    /// The enhanced colour of every Gaussian.
+    pub colors: Vec<[f32; 3]>,
+    /// Loss terms of the final colours.
+    pub terms: ImageTerms,
+    /// Mean luma of the working image before and after.
+    pub mean_luma: (f32, f32),
+}
+
+/// The working size for an image of `width × height`: scaled so the long side is at
+/// most `side`, never up.
+pub fn work_size(width: u32, height: u32, side: u32) -> (u32, u32) {
+    let long = width.max(height).max(1);
+    if long <= side {
+        return (width.max(1), height.max(1));
+    }
+    let s = f64::from(side) / f64::from(long);
+    let scale = |x: u32| ((f64::from(x) * s).round() as u32).max(1);
+    (scale(width), scale(height))
+}
+
+/// Mean Rec. 601 luma of an image of `width·height·3` floats, clamped to `[0, 1]`.
+pub fn mean_luma(img: &[f32]) -> f32 {
+    let n = (img.len() / 3).max(1) as f64;
+    let s: f64 = img
+        .chunks_exact(3)
+        .map(|p| {
+            f64::from(
+                0.299 * p[0].clamp(0.0, 1.0)
+                    + 0.587 * p[1].clamp(0.0, 1.0)
+                    + 0.114 * p[2].clamp(0.0, 1.0),
+            )
+        })
+        .sum();
+    (s / n) as f32
+}
+
+/// Mean luma of `scene` rendered at the working size: what decides whether an image is
+/// low-light at all.
+pub fn scene_luma(scene: &Scene, work_side: u32) -> f32 {
+    let (w, h) = work_size(scene.width, scene.height, work_side);
+    let a = ColorOperator::new(scene, w, h);
+    let mut img = vec![0.0; (w * h * 3) as usize];
+    a.render(&scene.gaussians.colors, &mut img);
+    mean_luma(&img)
+}
+
+/// The trainable numbers, as one flat vector so one optimizer serves them all:
+/// head `W1 (Hh×D), b1, W2 (K×Hh), b2`, then the operators' parameters.
+struct Layout {
+    dim: usize,
+    head_hidden: usize,
+    experts: usize,
+    hidden: usize,
+}
+
+impl Layout {
+    fn head_len(&self) -> usize {
+        self.head_hidden * self.dim
+            + self.head_hidden
+            + self.experts * self.head_hidden
+            + self.experts
+    }
+    fn ops_len(&self) -> usize {
+        (self.experts - 1) * Enhancer::params_per_operator(self.hidden)
+    }
+}
+
+/// Adam over a flat vector, with the update skipped for non-finite gradients.
+struct FlatAdam {
+    m: Vec<f32>,
+    v: Vec<f32>,
+    step: i32,
+}
+
+impl FlatAdam {
+    fn new(n: usize) -> Self {
+        FlatAdam {
+            m: vec![0.0; n],
+            v: vec![0.0; n],
+            step: 0,
+        }
+    }
+
+    fn update(&mut self, p: &mut [f32], g: &[f32], lr: f32) {
+        const B1: f32 = 0.9;
+        const B2: f32 = 0.999;
+        self.step += 1;
+        let c1 = 1.0 - B1.powi(self.step);
+        let c2 = 1.0 - B2.powi(self.step);
+        for ((p, &g), (m, v)) in p.iter_mut().zip(g).zip(self.m.iter_mut().zip(&mut self.v)) {
+            let g = if g.is_finite() { g } else { 0.0 };
+            *m = B1 * *m + (1.0 - B1) * g;
+            *v = B2 * *v + (1.0 - B2) * g * g;
+            *p -= lr * (*m / c1) / ((*v / c2).sqrt() + 1e-8);
+        }
+    }
+}
+
+/// Gaussians per parallel work item. Fixed, so that gradients are summed in the same
+/// order whatever the thread count and the fit is reproducible from its seed.
+const CHUNK: usize = 512;
+
+/// Fit an enhancer to `scene` and return it with the colours it produces.
+///
+/// # Panics
+/// If `opts.experts` is 0 or above 64, or `opts.hidden`/`head_hidden` is 0.
+pub fn fit(
+    scene: &Scene,
+    opts: &EnhanceOptions,
+    backbone: &dyn Backbone,
+    progress: &mut dyn FnMut(&Progress),
+) -> Fitted {
+    assert!(
+        (1..=usize::from(MAX_EXPERTS)).contains(&opts.experts),
+        "K out of range"
+    );
+    assert!(opts.hidden >= 1 && opts.hidden <= 64 && opts.head_hidden >= 1);
+    let (ww, wh) = work_size(scene.width, scene.height, opts.work_side);
+    let a = ColorOperator::new(scene, ww, wh);
+    let c0 = &scene.gaussians.colors;
+    let positions = &scene.gaussians.positions;
+    let n = c0.len();
+
+    let mut low = vec![0.0f32; (ww * wh * 3) as usize];
+    a.render(c0, &mut low);
+    for x in &mut low {
+        *x = x.clamp(0.0, 1.0);
+    }
+    let cell = opts.cell.max(1);
+    let (mw, mh) = (ww.div_ceil(cell) as usize, wh.div_ceil(cell) as usize);
+    let cells = mw * mh;
+    let feats = backbone.extract(&low, ww as usize, wh as usize, mw, mh);
+    let loss = ImageLoss::new(&low, ww as usize, wh as usize, opts.weights, opts.params);
+    let taps: Vec<MapTap> = positions.iter().map(|&p| tap(mw, mh, p)).collect();
+
+    let lay = Layout {
+        dim: backbone.dim(),
+        head_hidden: opts.head_hidden,
+        experts: opts.experts,
+        hidden: opts.hidden,
+    };
+    let mut theta = init(&lay, opts.seed);
+    let mut grad = vec![0.0f32; theta.len()];
+    let mut adam = FlatAdam::new(theta.len());
+    let mut enh = Enhancer {
+        experts: opts.experts,
+        hidden: opts.hidden,
+        clamp: clamp_for(scene.blend),
+        map_width: mw,
+        map_height: mh,
+        map: vec![0.0; cells * opts.experts],
+        params: Vec::new(),
+    };
+    let mut head_act = vec![0.0f32; cells * opts.head_hidden];
+    let mut colors = vec![[0.0f32; 3]; n];
+    let mut img = vec![0.0f32; low.len()];
+    let mut g_img = vec![0.0f32; low.len()];
+    let mut g_col = vec![[0.0f32; 3]; n];
+    let mut g_map = vec![0.0f32; cells * opts.experts];
+
+    let iterations = opts.iterations;
+    for it in 0..iterations {
+        head_forward(&lay, &theta, &feats, &mut head_act, &mut enh.map);
+        enh.params.clear();
+        enh.params.extend_from_slice(&theta[lay.head_len()..]);
+        mix_forward(&enh, &taps, c0, &mut colors);
+        a.render(&colors, &mut img);
+        let terms = clamped_loss(&loss, &mut img, &mut g_img);
+        a.transpose(&g_img, &mut g_col);
+        grad.fill(0.0);
+        g_map.fill(0.0);
+        mix_backward(
+            &enh,
+            &taps,
+            c0,
+            &g_col,
+            &mut g_map,
+            &mut grad[lay.head_len()..],
+        );
+        let map_terms = map_regularizers(&enh.map, mw, mh, opts.experts, &opts.weights, &mut g_map);
+        head_backward(&lay, &theta, &feats, &head_act, &g_map, &mut grad);
+        let t = it as f32 / iterations.max(1) as f32;
+        let lr =
+            opts.learning_rate * (0.01 + 0.99 * 0.5 * (1.0 + (std::f32::consts::PI * t).cos()));
+        adam.update(&mut theta, &grad, lr);
+        progress(&Progress {
+            iteration: it + 1,
+            iterations,
+            terms,
+            map: map_terms,
+        });
+    }
+
+    head_forward(&lay, &theta, &feats, &mut head_act, &mut enh.map);
+    enh.params.clear();
+    enh.params.extend_from_slice(&theta[lay.head_len()..]);
+    let fit = FitSettings {
+        weights: {
+            let w = &opts.weights;
+            [
+                w.exposure, w.hue, w.spatial, w.colour, w.contrast, w.tv, w.entropy,
+            ]
+        },
+        exposure: opts.params.exposure_target,
+        saturation_tau: opts.params.saturation_tau,
+        contrast_gamma: opts.params.contrast_gamma,
+        iterations,
+        seed: opts.seed,
+    };
+    let record = enh.to_record(fit);
+    let enhancer = Enhancer::from_record(&record);
+    let colors = enhancer.apply(positions, c0);
+    a.render(&colors, &mut img);
+    let terms = clamped_loss(&loss, &mut img, &mut g_img);
+    Fitted {
+        record,
+        enhancer,
+        colors,
+        terms,
+        mean_luma: (mean_luma(&low), mean_luma(&img)),
+    }
+}
+
+/// The loss sees the image as the 8-bit decoder will show it, clamped to `[0, 1]`;
+/// where the clamp is active no gradient flows.
+fn clamped_loss(loss: &ImageLoss, img: &mut [f32], g: &mut [f32]) -> ImageTerms {
+    let raw = img.to_vec();
+    for x in img.iter_mut() {
+        *x = x.clamp(0.0, 1.0);
+    }
+    let terms = loss.eval(img, g);
+    for (g, r) in g.iter_mut().zip(raw) {
+        if !(0.0..=1.0).contains(&r) {
+            *g = 0.0;
+        }
+    }
+    terms
+}
+
+/// Initial parameters: He-style uniform for the hidden layers, small positive hidden
+/// biases (dark colours are tiny inputs; the ReLUs must start open for any gradient to
+/// reach the first layers), a small random head output (near-uniform mixing weights),
+/// and zero last layers for the operators, so that every operator starts as the
+/// identity (paper Eq. 14).
+fn init(lay: &Layout, seed: u64) -> Vec<f32> {
+    let mut rng = SplitMix64::new(seed ^ 0x6a09_e667_f3bc_c908);
+    let mut out = Vec::with_capacity(lay.head_len() + lay.ops_len());
+    let mut uniform = |n: usize, fan_in: usize, out: &mut Vec<f32>| {
+        let a = (6.0 / fan_in.max(1) as f32).sqrt();
+        out.extend((0..n).map(|_| rng.range(-a, a)));
+    };
+    let (d, hh, k, h) = (lay.dim, lay.head_hidden, lay.experts, lay.hidden);
+    uniform(hh * d, d, &mut out);
+    out.extend(std::iter::repeat_n(0.1, hh));
+    uniform(k * hh, hh * 100, &mut out);
+    out.extend(std::iter::repeat_n(0.0, k));
+    let mut rng2 = SplitMix64::new(seed ^ 0xbb67_ae85_84ca_a73b);
+    for _ in 1..k {
+        let a1 = (6.0f32 / 3.0).sqrt();
+        out.extend((0..3 * h).map(|_| rng2.range(-a1, a1)));
+        out.extend((0..h).map(|_| rng2.range(0.0, 0.5)));
+        let a2 = (6.0 / h as f32).sqrt();
+        out.extend((0..h * h).map(|_| rng2.range(-a2, a2)));
+        out.extend((0..h).map(|_| rng2.range(0.0, 0.5)));
+        out.extend(std::iter::repeat_n(0.0, 3 * h + 3));
+    }
+    out
+}
+
+/// `map = W2·relu(W1·f + b1) + b2` per cell; `act` keeps the pre-activations.
+fn head_forward(lay: &Layout, theta: &[f32], feats: &[f32], act: &mut [f32], map: &mut [f32]) {
+    let (d, hh, k) = (lay.dim, lay.head_hidden, lay.experts);
+    let (w1, rest) = theta.split_at(hh * d);
+    let (b1, rest) = rest.split_at(hh);
+    let (w2, rest) = rest.split_at(k * hh);
+    let b2 = &rest[..k];
+    for ((f, a), m) in feats
+        .chunks_exact(d)
+        .zip(act.chunks_exact_mut(hh))
+        .zip(map.chunks_exact_mut(k))
+    {
+        for j in 0..hh {
+            a[j] = b1[j]
+                + w1[j * d..][..d]
+                    .iter()
+                    .zip(f)
+                    .map(|(w, x)| w * x)
+                    .sum::<f32>();
+        }
+        for (o, m) in m.iter_mut().enumerate() {
+            *m = b2[o]
+                + w2[o * hh..][..hh]
+                    .iter()
+                    .zip(&*a)
+                    .map(|(w, x)| w * x.max(0.0))
+                    .sum::<f32>();
+        }
+    }
+}
+
+/// Gradients of the head parameters (written into `grad[..head_len]`) from `g_map`.
+fn head_backward(
+    lay: &Layout,
+    theta: &[f32],
+    feats: &[f32],
+    act: &[f32],
+    g_map: &[f32],
+    grad: &mut [f32],
+) {
+    let (d, hh, k) = (lay.dim, lay.head_hidden, lay.experts);
+    let w2 = &theta[hh * d + hh..][..k * hh];
+    let (gw1, rest) = grad.split_at_mut(hh * d);
+    let (gb1, rest) = rest.split_at_mut(hh);
+    let (gw2, rest) = rest.split_at_mut(k * hh);
+    let gb2 = &mut rest[..k];
+    let mut g_act = vec![0.0f32; hh];
+    for ((f, a), gm) in feats
+        .chunks_exact(d)
+        .zip(act.chunks_exact(hh))
+        .zip(g_map.chunks_exact(k))
+    {
+        g_act.fill(0.0);
+        for (o, &g) in gm.iter().enumerate() {
+            if g == 0.0 {
+                continue;
+            }
+            gb2[o] += g;
+            for j in 0..hh {
+                gw2[o * hh + j] += g * a[j].max(0.0);
+                g_act[j] += g * w2[o * hh + j];
+            }
+        }
+        for j in 0..hh {
+            if a[j] <= 0.0 || g_act[j] == 0.0 {
+                continue;
+            }
+            gb1[j] += g_act[j];
+            for (gw, x) in gw1[j * d..][..d].iter_mut().zip(f) {
+                *gw += g_act[j] * x;
+            }
+        }
+    }
+}
+
+/// Every Gaussian's mixed colour (paper Eq. 15) with the current parameters.
+fn mix_forward(enh: &Enhancer, taps: &[MapTap], c0: &[[f32; 3]], out: &mut [[f32; 3]]) {
+    let job = |(o, (t, c)): (&mut [[f32; 3]], (&[MapTap], &[[f32; 3]]))| {
+        let mut s = MixScratch::new(enh);
+        for (o, (t, c)) in o.iter_mut().zip(t.iter().zip(c)) {
+            *o = s.mix(enh, t, *c);
+        }
+    };
+    #[cfg(feature = "parallel")]
+    {
+        use rayon::prelude::*;
+        out.par_chunks_mut(CHUNK)
+            .zip(taps.par_chunks(CHUNK).zip(c0.par_chunks(CHUNK)))
+            .for_each(job);
+    }
+    #[cfg(not(feature = "parallel"))]
+    out.chunks_mut(CHUNK)
+        .zip(taps.chunks(CHUNK).zip(c0.chunks(CHUNK)))
+        .for_each(job);
+}
+
+/// Gradients of the operators' parameters (added to `g_params`) and of the map logits
+/// (added to `g_map`) from the gradients `g_col` of the mixed colours.
+fn mix_backward(
+    enh: &Enhancer,
+    taps: &[MapTap],
+    c0: &[[f32; 3]],
+    g_col: &[[f32; 3]],
+    g_map: &mut [f32],
+    g_params: &mut [f32],
+) {
+    let job = |(t, (c, g)): (&[MapTap], (&[[f32; 3]], &[[f32; 3]]))| {
+        let mut s = MixScratch::new(enh);
+        let mut gm = vec![0.0f32; g_map.len()];
+        let mut gp = vec![0.0f32; g_params.len()];
+        for (t, (c, g)) in t.iter().zip(c.iter().zip(g)) {
+            s.backward(enh, t, *c, *g, &mut gm, &mut gp);
+        }
+        (gm, gp)
+    };
+    let add = |(gm, gp): (Vec<f32>, Vec<f32>), g_map: &mut [f32], g_params: &mut [f32]| {
+        g_map.iter_mut().zip(gm).for_each(|(a, b)| *a += b);
+        g_params.iter_mut().zip(gp).for_each(|(a, b)| *a += b);
+    };
+    #[cfg(feature = "parallel")]
+    {
+        use rayon::prelude::*;
+        let parts: Vec<_> = taps
+            .par_chunks(CHUNK)
+            .zip(c0.par_chunks(CHUNK).zip(g_col.par_chunks(CHUNK)))
+            .map(job)
+            .collect();
+        for p in parts {
+            add(p, g_map, g_params);
+        }
+    }
+    #[cfg(not(feature = "parallel"))]
+    for p in taps
+        .chunks(CHUNK)
+        .zip(c0.chunks(CHUNK).zip(g_col.chunks(CHUNK)))
+    {
+        add(job(p), g_map, g_params);
+    }
+}
+
+/// Buffers for one Gaussian's forward and backward pass through the mixture.
+struct MixScratch {
+    w: Vec<f32>,
+    h1: Vec<f32>,
+    h2: Vec<f32>,
+    g_w: Vec<f32>,
+    g2: Vec<f32>,
+}
+
+impl MixScratch {
+    fn new(e: &Enhancer) -> Self {
+        MixScratch {
+            w: vec![0.0; e.experts],
+            h1: vec![0.0; e.hidden],
+            h2: vec![0.0; e.hidden],
+            g_w: vec![0.0; e.experts],
+            g2: vec![0.0; e.hidden],
+        }
+    }
+
+    fn mix(&mut self, e: &Enhancer, t: &MapTap, c: [f32; 3]) -> [f32; 3] {
+        e.weights_at(t, &mut self.w);
+        let mut out = c.map(|x| x * self.w[0]);
+        for op in 1..e.experts {
+            let (y, _) = e.operator(op, c, &mut self.h1, &mut self.h2);
+            for (o, y) in out.iter_mut().zip(y) {
+                *o += self.w[op] * y;
+            }
+        }
+        out
+    }
+
+    fn backward(
+        &mut self,
+        e: &Enhancer,
+        t: &MapTap,
+        c: [f32; 3],
+        g: [f32; 3],
+        g_map: &mut [f32],
+        g_params: &mut [f32],
+    ) {
+        if g == [0.0; 3] {
+            return;
+        }
+        let (k, h) = (e.experts, e.hidden);
+        let per = Enhancer::params_per_operator(h);
+        e.weights_at(t, &mut self.w);
+        self.g_w[0] = dot(g, c);
+        for op in 1..k {
+            let (y, raw) = e.operator(op, c, &mut self.h1, &mut self.h2);
+            self.g_w[op] = dot(g, y);
+            // d out / d raw: the mixing weight where the clamp is inactive.
+            let [lo, hi] = e.clamp;
+            let gy: [f32; 3] = std::array::from_fn(|o| {
+                if raw[o] > lo && raw[o] < hi {
+                    self.w[op] * g[o]
+                } else {
+                    0.0
+                }
+            });
+            if gy == [0.0; 3] {
+                continue;
+            }
+            let p = &e.params[(op - 1) * per..][..per];
+            let gp = &mut g_params[(op - 1) * per..][..per];
+            let (w2, w3) = (
+                &p[4 * h..4 * h + h * h],
+                &p[5 * h + h * h..5 * h + h * h + 3 * h],
+            );
+            let (gw1, gr) = gp.split_at_mut(3 * h);
+            let (gb1, gr) = gr.split_at_mut(h);
+            let (gw2, gr) = gr.split_at_mut(h * h);
+            let (gb2, gr) = gr.split_at_mut(h);
+            let (gw3, gb3) = gr.split_at_mut(3 * h);
+            self.g2.fill(0.0);
+            for o in 0..3 {
+                gb3[o] += gy[o];
+                for j in 0..h {
+                    gw3[o * h + j] += gy[o] * self.h2[j].max(0.0);
+                    self.g2[j] += gy[o] * w3[o * h + j];
+                }
+            }
+            for j in 0..h {
+                if self.h2[j] <= 0.0 {
+                    self.g2[j] = 0.0;
+                }
+            }
+            for l in 0..h {
+                if self.h1[l] <= 0.0 {
+                    continue;
+                }
+                let mut g1 = 0.0;
+                for j in 0..h {
+                    g1 += self.g2[j] * w2[j * h + l];
+                }
+                gb1[l] += g1;
+                for (ci, cv) in c.iter().enumerate() {
+                    gw1[l * 3 + ci] += g1 * cv;
+                }
+            }
+            for j in 0..h {
+                if self.g2[j] == 0.0 {
+                    continue;
+                }
+                gb2[j] += self.g2[j];
+                for l in 0..h {
+                    gw2[j * h + l] += self.g2[j] * self.h1[l].max(0.0);
+                }
+            }
+        }
+        // Softmax: d/d logit_k = w_k (g_w_k − Σ_j w_j g_w_j); then the bilinear tap.
+        let s: f32 = self.w.iter().zip(&self.g_w).map(|(w, g)| w * g).sum();
+        for (cell, b) in t.cells.iter().zip(t.weights) {
+            if b == 0.0 {
+                continue;
+            }
+            let gm = &mut g_map[*cell as usize * k..][..k];
+            for op in 0..k {
+                gm[op] += b * self.w[op] * (self.g_w[op] - s);
+            }
+        }
+    }
+}
+
+fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+#[doc(hidden)]
+pub mod testing {
+    //! Hooks for the gradient check of the whole chain.
+    use super::*;
+
+    /// Total loss (image terms + map regularizers) of parameter vector `theta` and its
+    /// analytic gradient, for a scene and options, with the feature bank.
+    pub fn loss_and_grad(
+        scene: &Scene,
+        opts: &EnhanceOptions,
+        theta: Option<&[f32]>,
+    ) -> (f64, Vec<f32>, Vec<f32>) {
+        let bb = super::super::features::FeatureBank;
+        let (ww, wh) = work_size(scene.width, scene.height, opts.work_side);
+        let a = ColorOperator::new(scene, ww, wh);
+        let c0 = &scene.gaussians.colors;
+        let mut low = vec![0.0f32; (ww * wh * 3) as usize];
+        a.render(c0, &mut low);
+        low.iter_mut().for_each(|x| *x = x.clamp(0.0, 1.0));
+        let cell = opts.cell.max(1);
+        let (mw, mh) = (ww.div_ceil(cell) as usize, wh.div_ceil(cell) as usize);
+        let feats = bb.extract(&low, ww as usize, wh as usize, mw, mh);
+        let loss = ImageLoss::new(&low, ww as usize, wh as usize, opts.weights, opts.params);
+        let taps: Vec<MapTap> = scene
+            .gaussians
+            .positions
+            .iter()
+            .map(|&p| tap(mw, mh, p))
+            .collect();
+        let lay = Layout {
+            dim: bb.dim(),
+            head_hidden: opts.head_hidden,
+            experts: opts.experts,
+            hidden: opts.hidden,
+        };
+        let theta = theta
+            .map(<[f32]>::to_vec)
+            .unwrap_or_else(|| init(&lay, opts.seed));
+        let mut enh = Enhancer {
+            experts: opts.experts,
+            hidden: opts.hidden,
+            clamp: clamp_for(scene.blend),
+            map_width: mw,
+            map_height: mh,
+            map: vec![0.0; mw * mh * opts.experts],
+            params: theta[lay.head_len()..].to_vec(),
+        };
+        let mut act = vec![0.0; mw * mh * opts.head_hidden];
+        head_forward(&lay, &theta, &feats, &mut act, &mut enh.map);
+        let mut colors = vec![[0.0; 3]; c0.len()];
+        mix_forward(&enh, &taps, c0, &mut colors);
+        let mut img = vec![0.0; low.len()];
+        a.render(&colors, &mut img);
+        let mut g_img = vec![0.0; low.len()];
+        let terms = clamped_loss(&loss, &mut img, &mut g_img);
+        let mut g_col = vec![[0.0; 3]; c0.len()];
+        a.transpose(&g_img, &mut g_col);
+        let mut grad = vec![0.0; theta.len()];
+        let mut g_map = vec![0.0; enh.map.len()];
+        mix_backward(
+            &enh,
+            &taps,
+            c0,
+            &g_col,
+            &mut g_map,
+            &mut grad[lay.head_len()..],
+        );
+        let mt = map_regularizers(&enh.map, mw, mh, opts.experts, &opts.weights, &mut g_map);
+        head_backward(&lay, &theta, &feats, &act, &g_map, &mut grad);
+        let total = f64::from(terms.total)
+            + f64::from(opts.weights.tv * mt.tv)
+            + f64::from(opts.weights.entropy * mt.entropy);
+        (total, grad, theta)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::Blend;
+    use crate::synth::{random_scene, SceneSpec};
+
+    /// The whole chain (head, softmax, bilinear taps, operators, clamps, `A`, losses)
+    /// against central differences of the total loss.
+    #[test]
+    fn chain_gradient_matches_finite_differences() {
+        let only = |k: usize| {
+            let mut w = [0.0f32; 7];
+            w[k] = 1.0;
+            LossWeights {
+                exposure: w[0],
+                hue: w[1],
+                spatial: w[2],
+                colour: w[3],
+                contrast: w[4],
+                tv: w[5],
+                entropy: w[6],
+            }
+        };
+        let cases = (0..7).map(|k| (Blend::Sum, only(k))).chain([
+            (Blend::Sum, LossWeights::default()),
+            (Blend::Alpha, LossWeights::default()),
+        ]);
+        for (blend, weights) in cases {
+            let mut scene = random_scene(5, SceneSpec::new(40, 30, 80, blend));
+            for c in &mut scene.gaussians.colors {
+                *c = c.map(|x| x * 0.3);
+            }
+            let opts = EnhanceOptions {
+                experts: 4,
+                hidden: 3,
+                head_hidden: 5,
+                cell: 10,
+                weights,
+                // Large enough that the contrast term's hinge is active.
+                params: LossParams {
+                    contrast_gamma: 3.0,
+                    ..LossParams::default()
+                },
+                ..EnhanceOptions::default()
+            };
+            let (_, _, theta) = testing::loss_and_grad(&scene, &opts, None);
+            // Move well off the identity start: there every |difference| of the hue
+            // and spatial terms sits at its kink, where differences are meaningless.
+            let mut rng = SplitMix64::new(4);
+            let theta: Vec<f32> = theta.iter().map(|t| t + rng.range(-0.05, 0.05)).collect();
+            let (l0, grad, _) = testing::loss_and_grad(&scene, &opts, Some(&theta));
+            // Rounding of an f32 render limits the differences to about 1e-4 of the loss.
+            let noise = 1e-4 * l0.abs().max(1.0);
+            let mut checked = 0;
+            for _ in 0..60 {
+                let i = (rng.next_u64() % theta.len() as u64) as usize;
+                // Kinks (argmax switches of the hue, |·| of the spatial term, clamps)
+                // lie near some parameters: a difference straddling one is off, so
+                // accept the best of three step sizes.
+                let an = f64::from(grad[i]);
+                let fds: Vec<f64> = [1e-3f32, 3e-4, 1e-4]
+                    .iter()
+                    .map(|&h| {
+                        let mut tp = theta.clone();
+                        tp[i] += h;
+                        let (lp, _, _) = testing::loss_and_grad(&scene, &opts, Some(&tp));
+                        tp[i] -= 2.0 * h;
+                        let (lm, _, _) = testing::loss_and_grad(&scene, &opts, Some(&tp));
+                        (lp - lm) / (2.0 * f64::from(h))
+                    })
+                    .collect();
+                let fd = *fds
+                    .iter()
+                    .min_by(|a, b| (*a - an).abs().total_cmp(&(*b - an).abs()))
+                    .expect("three");
+                if fd.abs().max(an.abs()) < noise {
+                    continue;
+                }
+                checked += 1;
+                assert!(
+                    (fd - an).abs() <= 0.02 * fd.abs().max(an.abs()) + noise,
+                    "{blend:?} {weights:?} param {i}: fd {fds:?} vs analytic {an}"
+                );
+            }
+            assert!(
+                checked > 10,
+                "{blend:?} {weights:?}: only {checked} parameters carried gradient"
+            );
+        }
+    }
+}

@@ -1,0 +1,102 @@
+//! Stage 2: zero-shot low-light enhancement inside a `.gsi` file (paper §III-B).
+//!
+//! Geometry is frozen: the positions, covariances and opacities of a file are copied
+//! byte for byte, and only the colour records change. A small mixture of colour
+//! operators, mixed per Gaussian by a weight map over the image, is fitted to the one
+//! image with no-reference losses and stored in the file (`gENH`) beside the original
+//! colours (`gORC`), so that the enhancement can be re-applied without fitting
+//! ([`apply_from`]) or undone exactly ([`ChunkedFile::revert`]).
+//!
+//! * [`mixture`]: the enhancer as stored and applied (no rendering needed).
+//! * `features`, `loss`, `operator`, `fit`: fitting it (feature `encode`).
+
+pub mod mixture;
+
+#[cfg(feature = "encode")]
+pub mod features;
+#[cfg(feature = "encode")]
+pub mod fit;
+#[cfg(feature = "encode")]
+pub mod loss;
+#[cfg(feature = "encode")]
+pub mod operator;
+
+pub use mixture::Enhancer;
+
+use crate::format::{Attribute, ChunkedFile, Limits, Records, Result};
+use crate::model::Scene;
+
+/// Images whose mean luma (Rec. 601, `[0, 1]`) is above this are not low-light, and
+/// are left alone unless the caller insists. LOL's low-light inputs average 0.05–0.15;
+/// Kodak's photographs 0.3–0.6.
+pub const LOW_LIGHT_LUMA: f32 = 0.25;
+
+/// The scene a file shows before any enhancement: its geometry with the colours in
+/// `gORC` when it has them, else those in `GCOL`.
+pub fn base_scene(file: &ChunkedFile, limits: &Limits) -> Result<Scene> {
+    let records = Records {
+        colors: file.base_colors(limits)?,
+        ..file.file.records.clone()
+    };
+    Ok(records.to_scene())
+}
+
+/// Quantize enhanced colours with the bit depths the file's colours had (8 where a
+/// component was constant and stored in 0 bits).
+pub fn colors_like(colors: &[[f32; 3]], like: &Attribute) -> Attribute {
+    let bits = std::array::from_fn(|c| match like.quantizers.get(c).map_or(0, |q| q.bits) {
+        0 => 8,
+        b => b,
+    });
+    Attribute::fit(colors, bits)
+}
+
+/// Apply the enhancer stored in `source` to the colours of `target` (its original
+/// colours, when it was enhanced before and kept them): no fitting and no rendering.
+/// Returns the new file.
+pub fn apply_from(
+    target: &ChunkedFile,
+    source: &ChunkedFile,
+    keep_original: bool,
+    limits: &Limits,
+) -> Result<Vec<u8>> {
+    let record = source.enhancer(limits)?.ok_or_else(|| {
+        crate::format::Error::new(
+            crate::format::ErrorKind::MissingChunk,
+            "the source file has no gENH chunk",
+        )
+    })?;
+    let enhancer = Enhancer::from_record(&record);
+    let scene = base_scene(target, limits)?;
+    let colors = enhancer.apply(&scene.gaussians.positions, &scene.gaussians.colors);
+    let attr = colors_like(&colors, &target.base_colors(limits)?);
+    target.with_colors(
+        &attr,
+        &record,
+        keep_original,
+        crate::format::WriteOptions::default().zstd_level,
+    )
+}
+
+/// Fit an enhancer to the file's (original) colours and return the rewritten file with
+/// what the fit did. The caller decides beforehand whether the image needs it
+/// ([`fit::scene_luma`] against [`LOW_LIGHT_LUMA`]).
+#[cfg(feature = "encode")]
+pub fn enhance(
+    file: &ChunkedFile,
+    opts: &fit::EnhanceOptions,
+    keep_original: bool,
+    limits: &Limits,
+    progress: &mut dyn FnMut(&fit::Progress),
+) -> Result<(Vec<u8>, fit::Fitted)> {
+    let scene = base_scene(file, limits)?;
+    let fitted = fit::fit(&scene, opts, &features::FeatureBank, progress);
+    let attr = colors_like(&fitted.colors, &file.base_colors(limits)?);
+    let bytes = file.with_colors(
+        &attr,
+        &fitted.record,
+        keep_original,
+        crate::format::WriteOptions::default().zstd_level,
+    )?;
+    Ok((bytes, fitted))
+}

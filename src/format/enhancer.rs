@@ -1,0 +1,330 @@
+//! The stage-2 ancillary chunks (spec §7.2): `gENH`, a fitted colour enhancer, and
+//! `gORC`, the colour records it replaced.
+//!
+//! Only bytes live here. What the numbers mean (how a weight map and the operators turn
+//! one colour into another) is `crate::enhance::Enhancer`; keeping the two apart lets a
+//! decoder built without the enhancer still parse, validate and report these chunks.
+
+use super::error::{invalid, Error, ErrorKind, Result};
+use super::limits::{AllocBudget, Limits};
+use super::records::Attribute;
+use byteorder::{BigEndian, ByteOrder, WriteBytesExt};
+
+/// Version of the `gENH` layout written by this crate.
+pub const ENHANCER_VERSION: u8 = 1;
+/// Fixed part of a `gENH` payload; seven length-prefixed attribute blocks follow.
+pub const ENHANCER_FIXED_LEN: usize = 68;
+/// Most operators (identity included) a `gENH` may declare.
+pub const MAX_EXPERTS: u8 = 64;
+/// Widest hidden layer a `gENH` may declare.
+pub const MAX_HIDDEN: u8 = 64;
+/// Largest weight-map side, in cells.
+pub const MAX_MAP_SIDE: u16 = 1024;
+/// Number of parameter tensors per operator: `W1, b1, W2, b2, W3, b3`.
+pub const TENSORS: usize = 6;
+
+/// Zero-shot loss settings the enhancer was fitted with, kept so a file says how it was made.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FitSettings {
+    /// λ1..λ7 of the paper's Eq. 16 and 22.
+    pub weights: [f32; 7],
+    /// Exposure target E of Eq. 17.
+    pub exposure: f32,
+    /// Saturation threshold τ of Eq. 18.
+    pub saturation_tau: f32,
+    /// Contrast factor γ of Eq. 20.
+    pub contrast_gamma: f32,
+    pub iterations: u32,
+    pub seed: u64,
+}
+
+/// A `gENH` chunk: the mixture of colour operators and the weight map that mixes them.
+///
+/// Every learned number is stored quantized (as an [`Attribute`] of one component, the
+/// same layout as spec §5.1), and the enhancer that rewrote the colours is the
+/// *dequantized* one, so applying a stored enhancer reproduces the stored colours
+/// exactly.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EnhancerRecord {
+    /// K: operators including the identity (operator 0).
+    pub experts: u8,
+    /// Width of both hidden layers of every operator.
+    pub hidden: u8,
+    /// Each operator's output is clamped to `[clamp[0], clamp[1]]`.
+    pub clamp: [f32; 2],
+    pub map_width: u16,
+    pub map_height: u16,
+    /// Mixing logits, `map_height × map_width` cells of K values (K innermost).
+    pub map: Attribute,
+    /// `W1 (hidden×3), b1 (hidden), W2 (hidden×hidden), b2 (hidden), W3 (3×hidden), b3 (3)`
+    /// of operators 1..K, operator-major within each tensor, row-major matrices.
+    pub tensors: [Attribute; TENSORS],
+    pub fit: FitSettings,
+}
+
+/// Number of values in each of the six tensors of one operator.
+pub fn tensor_sizes(hidden: usize) -> [usize; TENSORS] {
+    [hidden * 3, hidden, hidden * hidden, hidden, 3 * hidden, 3]
+}
+
+impl EnhancerRecord {
+    /// Values each attribute block must hold: the map, then the six tensors.
+    fn counts(&self) -> [u64; 7] {
+        counts(self.experts, self.hidden, self.map_width, self.map_height)
+    }
+
+    /// The payload of a `gENH` chunk.
+    pub fn to_payload(&self, zstd_level: i32) -> Result<Vec<u8>> {
+        self.validate()?;
+        let mut out = Vec::new();
+        out.push(ENHANCER_VERSION);
+        out.push(self.experts);
+        out.push(self.hidden);
+        out.push(0);
+        out.write_f32::<BigEndian>(self.clamp[0])?;
+        out.write_f32::<BigEndian>(self.clamp[1])?;
+        out.write_u16::<BigEndian>(self.map_width)?;
+        out.write_u16::<BigEndian>(self.map_height)?;
+        out.write_u32::<BigEndian>(self.fit.iterations)?;
+        out.write_u64::<BigEndian>(self.fit.seed)?;
+        let f = &self.fit;
+        for x in f
+            .weights
+            .iter()
+            .chain([&f.exposure, &f.saturation_tau, &f.contrast_gamma])
+        {
+            out.write_f32::<BigEndian>(*x)?;
+        }
+        debug_assert_eq!(out.len(), ENHANCER_FIXED_LEN);
+        for a in std::iter::once(&self.map).chain(&self.tensors) {
+            let p = a.to_payload(zstd_level)?;
+            out.write_u32::<BigEndian>(p.len() as u32)?;
+            out.extend_from_slice(&p);
+        }
+        Ok(out)
+    }
+
+    /// The checks [`parse`](Self::parse) makes, for records built in memory.
+    fn validate(&self) -> Result<()> {
+        check_shape(self.experts, self.hidden, self.map_width, self.map_height)?;
+        check_clamp(self.clamp)?;
+        check_fit(&self.fit)?;
+        for (a, n) in std::iter::once(&self.map)
+            .chain(&self.tensors)
+            .zip(self.counts())
+        {
+            if a.components() != 1 || a.count() as u64 != n {
+                return Err(invalid(format!(
+                    "enhancer block of {} values, expected {n}",
+                    a.count()
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// Parse a `gENH` payload, bounding every allocation by `limits`.
+    pub fn parse(p: &[u8], limits: &Limits) -> Result<EnhancerRecord> {
+        if p.len() < ENHANCER_FIXED_LEN {
+            return Err(Error::new(
+                ErrorKind::BadChunkLength,
+                format!(
+                    "{} bytes, shorter than the {ENHANCER_FIXED_LEN}-byte gENH preamble",
+                    p.len()
+                ),
+            ));
+        }
+        if p[0] != ENHANCER_VERSION {
+            return Err(Error::new(
+                ErrorKind::UnsupportedVersion,
+                format!(
+                    "gENH layout {}, this decoder reads {ENHANCER_VERSION}",
+                    p[0]
+                ),
+            ));
+        }
+        let (experts, hidden) = (p[1], p[2]);
+        let f32_at = |o: usize| BigEndian::read_f32(&p[o..o + 4]);
+        let clamp = [f32_at(4), f32_at(8)];
+        let map_width = BigEndian::read_u16(&p[12..14]);
+        let map_height = BigEndian::read_u16(&p[14..16]);
+        let fit = FitSettings {
+            iterations: BigEndian::read_u32(&p[16..20]),
+            seed: BigEndian::read_u64(&p[20..28]),
+            weights: std::array::from_fn(|i| f32_at(28 + 4 * i)),
+            exposure: f32_at(56),
+            saturation_tau: f32_at(60),
+            contrast_gamma: f32_at(64),
+        };
+        check_shape(experts, hidden, map_width, map_height)?;
+        check_clamp(clamp)?;
+        check_fit(&fit)?;
+
+        let mut budget = AllocBudget::new(limits);
+        let mut rest = &p[ENHANCER_FIXED_LEN..];
+        let mut blocks = Vec::with_capacity(7);
+        for (b, n) in counts(experts, hidden, map_width, map_height)
+            .into_iter()
+            .enumerate()
+        {
+            if rest.len() < 4 {
+                return Err(Error::new(
+                    ErrorKind::BadChunkLength,
+                    format!("gENH ends before block {b}"),
+                ));
+            }
+            let len = BigEndian::read_u32(&rest[..4]) as usize;
+            rest = &rest[4..];
+            if len > rest.len() {
+                return Err(Error::new(
+                    ErrorKind::BadChunkLength,
+                    format!("gENH block {b} of {len} bytes, {} left", rest.len()),
+                ));
+            }
+            // `counts` stays far below u32::MAX by the shape limits.
+            blocks.push(Attribute::parse(
+                &rest[..len],
+                1,
+                n as u32,
+                limits,
+                &mut budget,
+            )?);
+            rest = &rest[len..];
+        }
+        if !rest.is_empty() {
+            return Err(Error::new(
+                ErrorKind::BadChunkLength,
+                format!("{} bytes after the last gENH block", rest.len()),
+            ));
+        }
+        let mut blocks = blocks.into_iter();
+        let map = blocks.next().expect("seven blocks");
+        let tensors = std::array::from_fn(|_| blocks.next().expect("seven blocks"));
+        Ok(EnhancerRecord {
+            experts,
+            hidden,
+            clamp,
+            map_width,
+            map_height,
+            map,
+            tensors,
+            fit,
+        })
+    }
+}
+
+fn counts(experts: u8, hidden: u8, map_width: u16, map_height: u16) -> [u64; 7] {
+    let k = u64::from(experts);
+    let ops = k.saturating_sub(1);
+    let t = tensor_sizes(usize::from(hidden));
+    let cells = u64::from(map_width) * u64::from(map_height);
+    let mut out = [cells * k; 7];
+    for (o, n) in out[1..].iter_mut().zip(t) {
+        *o = ops * n as u64;
+    }
+    out
+}
+
+fn check_shape(experts: u8, hidden: u8, map_width: u16, map_height: u16) -> Result<()> {
+    if !(1..=MAX_EXPERTS).contains(&experts) {
+        return Err(invalid(format!(
+            "{experts} operators, allowed 1..={MAX_EXPERTS}"
+        )));
+    }
+    if !(1..=MAX_HIDDEN).contains(&hidden) {
+        return Err(invalid(format!(
+            "hidden width {hidden}, allowed 1..={MAX_HIDDEN}"
+        )));
+    }
+    for side in [map_width, map_height] {
+        if !(1..=MAX_MAP_SIDE).contains(&side) {
+            return Err(invalid(format!(
+                "weight map side {side}, allowed 1..={MAX_MAP_SIDE}"
+            )));
+        }
+    }
+    Ok(())
+}
+
+fn check_clamp([lo, hi]: [f32; 2]) -> Result<()> {
+    let max = crate::render::COLOR_MAX;
+    if !(lo.is_finite() && hi.is_finite() && -max <= lo && lo < hi && hi <= max) {
+        return Err(invalid(format!("operator clamp [{lo}, {hi}]")));
+    }
+    Ok(())
+}
+
+fn check_fit(f: &FitSettings) -> Result<()> {
+    let all = f
+        .weights
+        .iter()
+        .chain([&f.exposure, &f.saturation_tau, &f.contrast_gamma]);
+    if all.clone().any(|x| !x.is_finite()) {
+        return Err(invalid("non-finite enhancer loss setting"));
+    }
+    Ok(())
+}
+
+/// A `gORC` chunk: what stage 2 replaced, so that `--revert` restores the file exactly.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct OriginalColors {
+    /// The `GCOL` payload before enhancement, byte for byte.
+    pub colors: Vec<u8>,
+    /// The `gCRM` payload before enhancement, when the file had one.
+    pub metadata: Option<Vec<u8>>,
+}
+
+const ORC_HAS_META: u8 = 1;
+
+impl OriginalColors {
+    pub fn to_payload(&self) -> Result<Vec<u8>> {
+        let mut out = Vec::with_capacity(5 + self.colors.len());
+        out.push(if self.metadata.is_some() {
+            ORC_HAS_META
+        } else {
+            0
+        });
+        let len = u32::try_from(self.colors.len()).map_err(|_| invalid("GCOL payload too long"))?;
+        out.write_u32::<BigEndian>(len)?;
+        out.extend_from_slice(&self.colors);
+        if let Some(m) = &self.metadata {
+            out.extend_from_slice(m);
+        }
+        Ok(out)
+    }
+
+    /// Split a `gORC` payload. The parts are only framed here: they are parsed as `GCOL`
+    /// and `gCRM` payloads where they are used.
+    pub fn parse(p: &[u8]) -> Result<OriginalColors> {
+        if p.len() < 5 {
+            return Err(Error::new(
+                ErrorKind::BadChunkLength,
+                format!("gORC of {} bytes", p.len()),
+            ));
+        }
+        let flags = p[0];
+        if flags & !ORC_HAS_META != 0 {
+            return Err(invalid(format!("gORC flags {flags:#04x}")));
+        }
+        let len = BigEndian::read_u32(&p[1..5]) as usize;
+        let rest = &p[5..];
+        if len > rest.len() {
+            return Err(Error::new(
+                ErrorKind::BadChunkLength,
+                format!("gORC colours of {len} bytes, {} present", rest.len()),
+            ));
+        }
+        let (colors, meta) = rest.split_at(len);
+        let has_meta = flags & ORC_HAS_META != 0;
+        if !has_meta && !meta.is_empty() {
+            return Err(Error::new(
+                ErrorKind::BadChunkLength,
+                "bytes after the gORC colours",
+            ));
+        }
+        Ok(OriginalColors {
+            colors: colors.to_vec(),
+            metadata: has_meta.then(|| meta.to_vec()),
+        })
+    }
+}
