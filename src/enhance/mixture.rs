@@ -9,6 +9,9 @@ use crate::model::Blend;
 pub const MAP_BITS: u8 = 10;
 /// Bits of each stored operator parameter.
 pub const PARAM_BITS: u8 = 12;
+/// Largest log-gain of an operator (a gain of e^8 ≈ 3000 takes any visible colour past
+/// the clamp); keeps `exp` finite for any stored parameters.
+pub const GAIN_LOG_MAX: f32 = 8.0;
 
 /// A fitted (or loaded) enhancer in the numbers it computes with.
 #[derive(Clone, Debug, PartialEq)]
@@ -24,7 +27,7 @@ pub struct Enhancer {
     /// Mixing logits, `map_height × map_width × K`, K innermost.
     pub map: Vec<f32>,
     /// Parameters of operators 1..K, [`Enhancer::params_per_operator`] each, laid out
-    /// `W1 (hidden×3), b1, W2 (hidden×hidden), b2, W3 (3×hidden), b3`.
+    /// `W1 (hidden×3), b1, W2 (hidden×hidden), b2, W3 (1×hidden), b3 (1)`.
     pub params: Vec<f32>,
 }
 
@@ -74,6 +77,22 @@ impl Enhancer {
 
     /// Operator `op` (1..K) applied to colour `c`, with the pre-activations the fitter
     /// needs (each `hidden` long) written to `h1`, `h2`. Returns `(output, unclamped)`.
+    ///
+    /// The residual is a gain shared by the three channels, `Φ(c) = clamp(c·exp(η(c)))`
+    /// with `η: R³ → R` (the identity at `η = 0`), rather than the offset `c + η(c)` of
+    /// the paper's Eq. 14. With an offset, the exposure and spatial losses
+    /// are both satisfied by adding a constant (the Sobel gradients do not change), and
+    /// the fit drifts to a flat, washed-out image tinted green (the channel with the
+    /// largest luma weight grows fastest). A gain keeps black black and edges in place,
+    /// as every tone curve of low-light enhancement does, so brightening must be paid for
+    /// in the spatial term and the fit settles on a real compromise. The gain is an
+    /// exponential so that it stays positive: a linear gain `1 + η` can pass through
+    /// zero, and the fit then found it cheaper to zero two channels than to brighten
+    /// three (a saturated green image). The gain is shared by the channels because
+    /// per-channel gains drift the same way: the exposure term pulls hardest on green
+    /// (the largest luma weight) and the hue term, saturated once a hue has turned,
+    /// cannot pull it back. A shared gain preserves hue by construction; the operator
+    /// still decides it from the whole colour, and the mixture varies it over the image.
     pub fn operator(
         &self,
         op: usize,
@@ -88,7 +107,7 @@ impl Enhancer {
         let (b1, p) = p.split_at(h);
         let (w2, p) = p.split_at(h * h);
         let (b2, p) = p.split_at(h);
-        let (w3, b3) = p.split_at(3 * h);
+        let (w3, b3) = p.split_at(h);
         for j in 0..h {
             let r = &w1[3 * j..3 * j + 3];
             h1[j] = b1[j] + r[0] * c[0] + r[1] * c[1] + r[2] * c[2];
@@ -101,16 +120,14 @@ impl Enhancer {
                     .map(|(a, &x)| a * x.max(0.0))
                     .sum::<f32>();
         }
-        let mut raw = [0.0f32; 3];
-        for (o, out) in raw.iter_mut().enumerate() {
-            let r = &w3[h * o..h * (o + 1)];
-            *out = c[o]
-                + b3[o]
-                + r.iter()
-                    .zip(&*h2)
-                    .map(|(a, &x)| a * x.max(0.0))
-                    .sum::<f32>();
-        }
+        let eta = b3[0]
+            + w3.iter()
+                .zip(&*h2)
+                .map(|(a, &x)| a * x.max(0.0))
+                .sum::<f32>();
+        // exp(η) > 0: a gain that can darken but never flip a colour's sign.
+        let gain = eta.min(GAIN_LOG_MAX).exp();
+        let raw = c.map(|x| x * gain);
         let [lo, hi] = self.clamp;
         // `max` then `min` also maps NaN to `lo`, so no operator output is ever NaN.
         (raw.map(|x| x.max(lo).min(hi)), raw)
@@ -318,7 +335,7 @@ mod tests {
         let mut e = sample(4, 5);
         let per = Enhancer::params_per_operator(5);
         for op in e.params.chunks_exact_mut(per) {
-            op[per - 3 * 5 - 3..].fill(0.0); // W3 and b3
+            op[per - 5 - 1..].fill(0.0); // W3 and b3
         }
         let c = [0.2, 0.5, 0.9];
         let out = e.apply(&[[0.3, 0.6]], &[c])[0];

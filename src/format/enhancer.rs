@@ -14,6 +14,9 @@ use byteorder::{BigEndian, ByteOrder, WriteBytesExt};
 pub const ENHANCER_VERSION: u8 = 1;
 /// Fixed part of a `gENH` payload; seven length-prefixed attribute blocks follow.
 pub const ENHANCER_FIXED_LEN: usize = 68;
+/// Shortest `gENH` payload: the fixed part and seven empty one-component blocks.
+pub const MIN_ENHANCER_LEN: usize =
+    ENHANCER_FIXED_LEN + 7 * (4 + super::records::attribute_preamble_len(1));
 /// Most operators (identity included) a `gENH` may declare.
 pub const MAX_EXPERTS: u8 = 64;
 /// Widest hidden layer a `gENH` may declare.
@@ -56,7 +59,7 @@ pub struct EnhancerRecord {
     pub map_height: u16,
     /// Mixing logits, `map_height × map_width` cells of K values (K innermost).
     pub map: Attribute,
-    /// `W1 (hidden×3), b1 (hidden), W2 (hidden×hidden), b2 (hidden), W3 (3×hidden), b3 (3)`
+    /// `W1 (hidden×3), b1 (hidden), W2 (hidden×hidden), b2 (hidden), W3 (1×hidden), b3 (1)`
     /// of operators 1..K, operator-major within each tensor, row-major matrices.
     pub tensors: [Attribute; TENSORS],
     pub fit: FitSettings,
@@ -64,7 +67,7 @@ pub struct EnhancerRecord {
 
 /// Number of values in each of the six tensors of one operator.
 pub fn tensor_sizes(hidden: usize) -> [usize; TENSORS] {
-    [hidden * 3, hidden, hidden * hidden, hidden, 3 * hidden, 3]
+    [hidden * 3, hidden, hidden * hidden, hidden, hidden, 1]
 }
 
 impl EnhancerRecord {

@@ -56,6 +56,8 @@ fn length_range(ty: ChunkType) -> Option<(u32, u32)> {
             META_FIXED_LEN as u32,
             (META_FIXED_LEN + MAX_SETTINGS_LEN) as u32,
         ),
+        ChunkType::ENHANCER => (super::enhancer::MIN_ENHANCER_LEN as u32, u32::MAX),
+        ChunkType::ORIGINAL_COLORS => ((5 + pre(3)) as u32, u32::MAX),
         _ => return None,
     })
 }

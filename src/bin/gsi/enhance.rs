@@ -29,6 +29,12 @@ pub struct Args {
     /// Number of colour operators K, the identity included (paper: 16).
     #[arg(long, default_value_t = EnhanceOptions::default().experts)]
     experts: usize,
+    /// Adam's initial step (it decays on a cosine to 1 % of this).
+    #[arg(long, default_value_t = EnhanceOptions::default().learning_rate)]
+    learning_rate: f32,
+    /// Loss weights λ1..λ7 (exposure, hue, spatial, colour, contrast, TV, entropy), comma-separated.
+    #[arg(long, value_name = "L1,..,L7", value_delimiter = ',')]
+    weights: Option<Vec<f32>>,
     /// Where to fit: `auto` uses the CPU (the GPU path is not built yet).
     #[arg(long, value_enum, default_value_t = DeviceArg::Auto)]
     device: DeviceArg,
@@ -117,7 +123,34 @@ pub fn run(args: Args) -> Result<(), Failure> {
                 args.input.display()
             )));
         }
+        let weights = match &args.weights {
+            None => EnhanceOptions::default().weights,
+            Some(w) if w.len() == 7 && w.iter().all(|x| x.is_finite() && *x >= 0.0) => {
+                gsi::enhance::loss::LossWeights {
+                    exposure: w[0],
+                    hue: w[1],
+                    spatial: w[2],
+                    colour: w[3],
+                    contrast: w[4],
+                    tv: w[5],
+                    entropy: w[6],
+                }
+            }
+            Some(w) => {
+                return Err(Failure(format!(
+                    "--weights {w:?}: seven finite, non-negative numbers are needed"
+                )))
+            }
+        };
+        if !(args.learning_rate.is_finite() && args.learning_rate > 0.0) {
+            return Err(Failure(format!(
+                "--learning-rate {} must be positive",
+                args.learning_rate
+            )));
+        }
         let opts = EnhanceOptions {
+            weights,
+            learning_rate: args.learning_rate,
             iterations: args.iterations,
             experts: args.experts,
             seed: args.seed,

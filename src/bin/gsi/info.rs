@@ -1,7 +1,7 @@
 //! `gsi info`: what a file holds and how compact it is.
 
 use crate::{read_gsi, Failure};
-use gsi::format::{CompressionMeta, GsiFile};
+use gsi::format::{ChunkType, CompressionMeta, EnhancerRecord, GsiFile, Limits};
 use serde_json::json;
 use std::path::PathBuf;
 
@@ -35,6 +35,22 @@ fn measured(f: &GsiFile) -> CompressionMeta {
         None,
         String::new(),
     )
+}
+
+/// What stage 2 left in the file: its enhancer (or why it cannot be read) and whether
+/// the original colours were kept.
+struct Stage2 {
+    enhancer: Option<Result<EnhancerRecord, String>>,
+    revertible: bool,
+}
+
+fn stage2(f: &GsiFile) -> Stage2 {
+    let find = |ty| f.ancillary.iter().find(|c| c.ty == ty);
+    Stage2 {
+        enhancer: find(ChunkType::ENHANCER)
+            .map(|c| EnhancerRecord::parse(&c.data, &Limits::default()).map_err(|e| e.to_string())),
+        revertible: find(ChunkType::ORIGINAL_COLORS).is_some(),
+    }
 }
 
 fn finite_or_null(x: f32) -> serde_json::Value {
@@ -72,6 +88,18 @@ fn to_json(f: &GsiFile) -> serde_json::Value {
         "cr_bytes": finite_or_null(m.cr_bytes),
         "psnr": f.metadata.as_ref().and_then(|s| s.psnr).map(finite_or_null),
         "encoder_settings": f.metadata.as_ref().map(|s| s.settings.clone()),
+        "enhancer": match stage2(f).enhancer {
+            None => serde_json::Value::Null,
+            Some(Err(e)) => json!({"error": e}),
+            Some(Ok(e)) => json!({
+                "experts": e.experts,
+                "hidden": e.hidden,
+                "map": [e.map_width, e.map_height],
+                "iterations": e.fit.iterations,
+                "exposure": e.fit.exposure,
+                "revertible": stage2(f).revertible,
+            }),
+        },
         "quantizers": {
             "GPOS": quantizers(&r.positions),
             "GCOV": quantizers(&r.covariance),
@@ -111,6 +139,27 @@ fn to_text(f: &GsiFile) -> String {
     );
     if let Some(p) = f.metadata.as_ref().and_then(|s| s.psnr) {
         s += &format!("stored result: {p:.2} dB PSNR against the encoder's input\n");
+    }
+    let st = stage2(f);
+    match &st.enhancer {
+        Some(Ok(e)) => {
+            s += &format!(
+                "enhanced: {} colour operators (hidden {}), {}x{} weight map, fitted in {} iterations to exposure {}; {}\n",
+                e.experts,
+                e.hidden,
+                e.map_width,
+                e.map_height,
+                e.fit.iterations,
+                e.fit.exposure,
+                if st.revertible {
+                    "original colours kept (--revert restores them)"
+                } else {
+                    "original colours discarded"
+                }
+            )
+        }
+        Some(Err(e)) => s += &format!("enhanced, but its gENH chunk is unreadable: {e}\n"),
+        None => {}
     }
     s += "chunks:";
     for c in &f.chunks {

@@ -1,0 +1,375 @@
+//! Stage 2 in the container: what `gsi enhance` promises about bytes, and that its
+//! outputs stay finite and in range on degenerate inputs.
+#![cfg(feature = "cli")]
+
+use gsi::enhance::fit::{fit, scene_luma, EnhanceOptions};
+use gsi::enhance::{self, features::FeatureBank, loss::LossParams, Enhancer};
+use gsi::format::{to_bytes, BitDepths, ChunkType, ChunkedFile, Limits, Records, WriteOptions};
+use gsi::model::{Blend, Scene};
+use gsi::synth::{random_scene, SceneSpec};
+use std::path::Path;
+use std::process::{Command, Output, Stdio};
+
+const BITS: BitDepths = BitDepths {
+    position: 12,
+    covariance: 8,
+    color: 8,
+    opacity: 6,
+};
+
+/// A dark scene of `n` Gaussians (colours scaled by `gain`), written as a stage-1 file.
+fn dark_file(seed: u64, n: usize, blend: Blend, gain: f32) -> Vec<u8> {
+    let mut scene = random_scene(seed, SceneSpec::new(48, 32, n, blend));
+    for c in &mut scene.gaussians.colors {
+        *c = c.map(|x| x * gain);
+    }
+    let opts = WriteOptions {
+        settings: Some("test=dark".into()),
+        psnr: Some(40.0),
+        ..WriteOptions::default()
+    };
+    to_bytes(&Records::from_scene(&scene, BITS), &opts).unwrap()
+}
+
+fn quick() -> EnhanceOptions {
+    EnhanceOptions {
+        iterations: 40,
+        experts: 4,
+        ..EnhanceOptions::default()
+    }
+}
+
+fn parse(bytes: &[u8]) -> ChunkedFile {
+    ChunkedFile::parse(bytes, Limits::default()).unwrap()
+}
+
+fn payload(f: &ChunkedFile, ty: ChunkType) -> Option<&[u8]> {
+    f.chunks.iter().find(|c| c.ty == ty).map(|c| &c.data[..])
+}
+
+fn enhanced(bytes: &[u8], keep: bool) -> Vec<u8> {
+    let file = parse(bytes);
+    enhance::enhance(&file, &quick(), keep, &Limits::default(), &mut |_| {})
+        .unwrap()
+        .0
+}
+
+/// Every colour record finite and within the operators' clamp or the original range,
+/// and the decoded image finite.
+fn assert_sane(bytes: &[u8]) {
+    let f = parse(bytes);
+    let scene: Scene = f.file.records.to_scene();
+    for c in scene.gaussians.colors.iter().flatten() {
+        assert!(c.is_finite() && c.abs() <= 64.0, "colour {c}");
+    }
+    let img = gsi::render::render(&scene, scene.width, scene.height).unwrap();
+    assert!(img.data.iter().all(|x| x.is_finite()));
+}
+
+#[test]
+fn geometry_is_copied_byte_for_byte_and_only_colours_change() {
+    for blend in [Blend::Sum, Blend::Alpha] {
+        let before = dark_file(1, 60, blend, 0.15);
+        let opts = EnhanceOptions {
+            iterations: 200,
+            ..quick()
+        };
+        let after = enhance::enhance(
+            &parse(&before),
+            &opts,
+            true,
+            &Limits::default(),
+            &mut |_| {},
+        )
+        .unwrap()
+        .0;
+        let (b, a) = (parse(&before), parse(&after));
+        for ty in [
+            ChunkType::HEADER,
+            ChunkType::POSITIONS,
+            ChunkType::COVARIANCE,
+            ChunkType::OPACITY,
+        ] {
+            assert_eq!(payload(&b, ty), payload(&a, ty), "{ty} changed");
+        }
+        assert_ne!(
+            payload(&b, ChunkType::COLORS),
+            payload(&a, ChunkType::COLORS)
+        );
+        let luma = |f: &ChunkedFile| scene_luma(&f.file.records.to_scene(), 256);
+        assert!(
+            luma(&a) > luma(&b) + 0.05,
+            "{blend:?}: {} -> {}",
+            luma(&b),
+            luma(&a)
+        );
+        // gCRM now describes the enhanced file and no longer claims the stage-1 PSNR.
+        let meta = a.file.metadata.as_ref().unwrap();
+        assert_eq!(meta.file_bytes, after.len() as u64);
+        assert_eq!(meta.psnr, None);
+        assert!(meta.settings.starts_with("test=dark\nstage2="));
+    }
+}
+
+#[test]
+fn revert_restores_the_original_file_exactly() {
+    let before = dark_file(2, 50, Blend::Sum, 0.2);
+    let once = enhanced(&before, true);
+    assert_eq!(parse(&once).revert().unwrap(), before);
+    // Enhancing again starts from the kept original, and still reverts exactly.
+    let twice = enhanced(&once, true);
+    assert_eq!(
+        payload(&parse(&twice), ChunkType::ORIGINAL_COLORS),
+        payload(&parse(&once), ChunkType::ORIGINAL_COLORS)
+    );
+    assert_eq!(parse(&twice).revert().unwrap(), before);
+    // Without gORC there is nothing to revert to.
+    let discarded = enhanced(&before, false);
+    assert!(payload(&parse(&discarded), ChunkType::ORIGINAL_COLORS).is_none());
+    assert!(parse(&discarded).revert().is_err());
+    assert!(parse(&before).revert().is_err());
+}
+
+#[test]
+fn apply_from_reproduces_the_fitted_colours() {
+    let before = dark_file(3, 70, Blend::Alpha, 0.2);
+    let after = enhanced(&before, true);
+    let lim = Limits::default();
+    // Applying the stored enhancer to the same original gives the same file.
+    let again = enhance::apply_from(&parse(&before), &parse(&after), true, &lim).unwrap();
+    assert_eq!(again, after);
+    // …and to the enhanced file itself (it starts from gORC), too.
+    let again = enhance::apply_from(&parse(&after), &parse(&after), true, &lim).unwrap();
+    assert_eq!(again, after);
+    // Another frame: same enhancer, different colours, no fitting.
+    let other = dark_file(4, 30, Blend::Alpha, 0.25);
+    let applied = enhance::apply_from(&parse(&other), &parse(&after), false, &lim).unwrap();
+    assert_sane(&applied);
+    assert_eq!(
+        payload(&parse(&applied), ChunkType::ENHANCER),
+        payload(&parse(&after), ChunkType::ENHANCER)
+    );
+    // A source with no enhancer is refused.
+    assert!(enhance::apply_from(&parse(&other), &parse(&before), false, &lim).is_err());
+}
+
+#[test]
+fn degenerate_scenes_stay_finite_and_in_range() {
+    let black = dark_file(5, 40, Blend::Sum, 0.0);
+    let one = dark_file(6, 1, Blend::Alpha, 0.1);
+    let none = dark_file(7, 0, Blend::Sum, 0.1);
+    for bytes in [&black, &one, &none] {
+        let out = enhanced(bytes, true);
+        assert_sane(&out);
+        assert_eq!(parse(&out).revert().unwrap(), *bytes);
+    }
+}
+
+#[test]
+fn one_operator_and_extreme_exposures_stay_finite_and_in_range() {
+    let bytes = dark_file(8, 50, Blend::Alpha, 0.15);
+    let scene = parse(&bytes).file.records.to_scene();
+    let cases = [
+        EnhanceOptions {
+            experts: 1,
+            ..quick()
+        },
+        EnhanceOptions {
+            params: LossParams {
+                exposure_target: 0.999,
+                ..LossParams::default()
+            },
+            ..quick()
+        },
+        EnhanceOptions {
+            params: LossParams {
+                exposure_target: 1e-4,
+                ..LossParams::default()
+            },
+            ..quick()
+        },
+        EnhanceOptions {
+            learning_rate: 10.0,
+            ..quick()
+        },
+    ];
+    for opts in cases {
+        let f = fit(&scene, &opts, &FeatureBank, &mut |p| {
+            assert!(p.terms.total.is_finite() && p.map.tv.is_finite() && p.map.entropy.is_finite());
+        });
+        for c in f.colors.iter().flatten() {
+            // Alpha blending: every operator clamps to [0, 1] and the identity keeps the
+            // original colour, so the mix stays in [0, 1].
+            assert!(
+                (0.0..=1.0).contains(c),
+                "{c} with K {} E {}",
+                opts.experts,
+                opts.params.exposure_target
+            );
+        }
+        assert!(f
+            .enhancer
+            .params
+            .iter()
+            .chain(&f.enhancer.map)
+            .all(|x| x.is_finite()));
+        assert!(f.mean_luma.1.is_finite());
+    }
+    // K = 1 is the identity whatever it was fitted to.
+    let f = fit(
+        &scene,
+        &EnhanceOptions {
+            experts: 1,
+            ..quick()
+        },
+        &FeatureBank,
+        &mut |_| {},
+    );
+    assert_eq!(f.colors, scene.gaussians.colors);
+    assert_eq!(Enhancer::from_record(&f.record).experts, 1);
+}
+
+#[test]
+fn fitting_is_reproducible_from_its_seed() {
+    let bytes = dark_file(9, 80, Blend::Sum, 0.2);
+    assert_eq!(enhanced(&bytes, true), enhanced(&bytes, true));
+}
+
+// --- the command line -----------------------------------------------------------
+
+fn gsi(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_gsi"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn tmp(name: &str) -> std::path::PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("enhance-cli");
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+#[test]
+fn cli_in_place_revert_and_apply_from() {
+    let before = dark_file(10, 60, Blend::Sum, 0.15);
+    let path = tmp("frame.gsi");
+    std::fs::write(&path, &before).unwrap();
+    let p = path.to_str().unwrap();
+    let out = gsi(&["enhance", p, "--in-place", "--iterations", "30", "--quiet"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let after = std::fs::read(&path).unwrap();
+    assert_ne!(after, before);
+
+    // A failure (a source without an enhancer) leaves the file untouched, with exit 1.
+    let plain = tmp("plain.gsi");
+    std::fs::write(&plain, &before).unwrap();
+    let out = gsi(&[
+        "enhance",
+        p,
+        "--in-place",
+        "--apply-from",
+        plain.to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(1));
+    assert_eq!(String::from_utf8_lossy(&out.stderr).lines().count(), 1);
+    assert_eq!(std::fs::read(&path).unwrap(), after);
+
+    // --apply-from onto the original gives the fitted file.
+    let copy = tmp("copy.gsi");
+    let out = gsi(&[
+        "enhance",
+        plain.to_str().unwrap(),
+        "-o",
+        copy.to_str().unwrap(),
+        "--apply-from",
+        p,
+    ]);
+    assert!(out.status.success());
+    assert_eq!(std::fs::read(&copy).unwrap(), after);
+
+    let out = gsi(&["enhance", p, "--in-place", "--revert"]);
+    assert!(out.status.success());
+    assert_eq!(std::fs::read(&path).unwrap(), before);
+    // Nothing left to revert.
+    let out = gsi(&["enhance", p, "--in-place", "--revert"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert_eq!(std::fs::read(&path).unwrap(), before);
+}
+
+#[test]
+fn cli_leaves_a_bright_image_alone_unless_forced() {
+    let bright = dark_file(11, 60, Blend::Alpha, 1.0);
+    let path = tmp("bright.gsi");
+    std::fs::write(&path, &bright).unwrap();
+    let p = path.to_str().unwrap();
+    let out = gsi(&["enhance", p, "--in-place", "--iterations", "20"]);
+    assert!(out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("not a low-light image"));
+    assert_eq!(std::fs::read(&path).unwrap(), bright);
+    let out = gsi(&[
+        "enhance",
+        p,
+        "--in-place",
+        "--iterations",
+        "20",
+        "--force",
+        "--quiet",
+    ]);
+    assert!(out.status.success());
+    assert_ne!(std::fs::read(&path).unwrap(), bright);
+}
+
+#[test]
+fn cli_works_in_a_pipe_and_refuses_bad_usage() {
+    let before = dark_file(12, 40, Blend::Sum, 0.15);
+    let mut child = Command::new(env!("CARGO_BIN_EXE_gsi"))
+        .args(["enhance", "-", "-o", "-", "--iterations", "20", "--quiet"])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stdin = child.stdin.take().unwrap();
+    let input = before.clone();
+    let feeder = std::thread::spawn(move || std::io::Write::write_all(&mut stdin, &input));
+    let out = child.wait_with_output().unwrap();
+    feeder.join().unwrap().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(parse(&out.stdout).revert().unwrap(), before);
+
+    let path = tmp("usage.gsi");
+    std::fs::write(&path, &before).unwrap();
+    let p = path.to_str().unwrap();
+    for args in [
+        vec!["enhance", p],                                              // no destination
+        vec!["enhance", p, "--in-place", "-o", "x.gsi"],                 // two destinations
+        vec!["enhance", p, "--in-place", "--revert", "--apply-from", p], // two modes
+    ] {
+        assert_eq!(gsi(&args).status.code(), Some(2), "{args:?}");
+    }
+    for args in [
+        vec!["enhance", p, "--in-place", "--exposure", "1.5"],
+        vec!["enhance", p, "--in-place", "--experts", "0"],
+        vec!["enhance", p, "--in-place", "--device", "gpu"],
+        vec!["enhance", "-", "--in-place"],
+    ] {
+        let out = gsi(&args);
+        assert_eq!(out.status.code(), Some(1), "{args:?}");
+        assert_eq!(std::fs::read(&path).unwrap(), before);
+    }
+    // Not a gsi file at all.
+    let junk = tmp("junk.gsi");
+    std::fs::write(&junk, b"not a gsi file").unwrap();
+    let out = gsi(&["enhance", junk.to_str().unwrap(), "--in-place"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert_eq!(std::fs::read(&junk).unwrap(), b"not a gsi file");
+}
