@@ -71,8 +71,8 @@ fn geometry_is_copied_byte_for_byte_and_only_colours_change() {
     for blend in [Blend::Sum, Blend::Alpha] {
         let before = dark_file(1, 60, blend, 0.15);
         let opts = EnhanceOptions {
-            iterations: 200,
-            ..quick()
+            experts: 4,
+            ..EnhanceOptions::default()
         };
         let after = enhance::enhance(
             &parse(&before),
