@@ -229,7 +229,55 @@ mod corpus {
             bytes: format::to_bytes(&records, &opts).expect("in-memory write"),
             expect: None,
         });
+        // Stage 2: a file enhanced in the container (gENH and gORC before GEND).
+        for (name, blend) in [("enhanced-sum-160", Sum), ("enhanced-alpha-160", Alpha)] {
+            let mut scene = random_scene(13, spec(64, 40, 160, blend, Lsr, blend == Alpha));
+            for c in &mut scene.gaussians.colors {
+                *c = c.map(|x| 0.2 * x);
+            }
+            out.push(CorpusFile {
+                name: format!("{name}.gsi"),
+                bytes: enhanced(&write(
+                    &Records::from_scene(&scene, BitDepths::default()),
+                    "generator=gsi-synth",
+                )),
+                expect: None,
+            });
+        }
         out
+    }
+
+    /// `bytes` rewritten by a fixed pseudo-random enhancer (K = 4, hidden 3, a 3×2 map),
+    /// as `gsi enhance` would store one.
+    pub(super) fn enhanced(bytes: &[u8]) -> Vec<u8> {
+        use crate::enhance::{colors_like, mixture::clamp_for, Enhancer};
+        let file = format::ChunkedFile::parse(bytes, format::Limits::default()).expect("own file");
+        let scene = file.file.records.to_scene();
+        let mut rng = super::SplitMix64::new(77);
+        let per = Enhancer::params_per_operator(3);
+        let e = Enhancer {
+            experts: 4,
+            hidden: 3,
+            clamp: clamp_for(scene.blend),
+            map_width: 3,
+            map_height: 2,
+            map: (0..24).map(|_| rng.range(-2.0, 2.0)).collect(),
+            params: (0..3 * per).map(|_| rng.range(-0.7, 0.7)).collect(),
+        };
+        let fit = format::FitSettings {
+            weights: [50.0, 25.0, 32.5, 2.91, 0.44, 500.0, 0.01],
+            exposure: 0.5,
+            saturation_tau: 0.1,
+            contrast_gamma: 1.05,
+            iterations: 0,
+            seed: 77,
+        };
+        let record = e.to_record(fit);
+        let applied = Enhancer::from_record(&record)
+            .apply(&scene.gaussians.positions, &scene.gaussians.colors);
+        let colors = colors_like(&applied, &file.file.records.colors);
+        file.with_colors(&colors, &record, true, 19)
+            .expect("in-memory rewrite")
     }
 
     /// Records whose covariances are singular, vanishing or enormous, and Gaussians far
@@ -327,6 +375,13 @@ mod corpus {
         let mut files: Vec<(ErrorKind, &str, Vec<u8>)> = Vec::new();
         use ErrorKind as K;
         files.push((K::Truncated, "empty-file", Vec::new()));
+        {
+            // A gENH shorter than its fixed part (spec §3): refused by length.
+            let mut p = parts.clone();
+            let end = p.len() - 1;
+            p.insert(end, (ChunkType::ENHANCER, vec![1, 4, 3, 0]));
+            files.push((K::BadChunkLength, "short-genh", assemble(&p)));
+        }
         files.push((K::Truncated, "signature-only", format::SIGNATURE.to_vec()));
         files.push((
             K::Truncated,

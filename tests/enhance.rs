@@ -264,6 +264,13 @@ fn cli_in_place_revert_and_apply_from() {
     );
     let after = std::fs::read(&path).unwrap();
     assert_ne!(after, before);
+    let info = gsi(&["info", p, "--json"]);
+    let json: serde_json::Value = serde_json::from_slice(&info.stdout).unwrap();
+    assert_eq!(json["enhancer"]["experts"], 16);
+    assert_eq!(json["enhancer"]["revertible"], true);
+    assert_eq!(json["file_bytes"].as_u64(), Some(after.len() as u64));
+    let text = String::from_utf8(gsi(&["info", p]).stdout).unwrap();
+    assert!(text.contains("enhanced: 16 colour operators"), "{text}");
 
     // A failure (a source without an enhancer) leaves the file untouched, with exit 1.
     let plain = tmp("plain.gsi");

@@ -227,8 +227,11 @@ fn markdown(rows: &[Row], opts: &EnhanceOptions, stamp: &(String, String)) -> St
     s
 }
 
+/// One row of the figure: input, gsi and reference, RGB8, with their size.
+type Example = (Vec<u8>, Vec<u8>, Vec<u8>, u32, u32);
+
 /// Rows of input | gsi | reference, each at half size.
-fn figure(examples: &[(Vec<u8>, Vec<u8>, Vec<u8>, u32, u32)], path: &Path) {
+fn figure(examples: &[Example], path: &Path) {
     let Some(&(_, _, _, w, h)) = examples.first() else {
         return;
     };

@@ -79,11 +79,7 @@ impl EnhancerRecord {
     /// The payload of a `gENH` chunk.
     pub fn to_payload(&self, zstd_level: i32) -> Result<Vec<u8>> {
         self.validate()?;
-        let mut out = Vec::new();
-        out.push(ENHANCER_VERSION);
-        out.push(self.experts);
-        out.push(self.hidden);
-        out.push(0);
+        let mut out = vec![ENHANCER_VERSION, self.experts, self.hidden, 0];
         out.write_f32::<BigEndian>(self.clamp[0])?;
         out.write_f32::<BigEndian>(self.clamp[1])?;
         out.write_u16::<BigEndian>(self.map_width)?;
