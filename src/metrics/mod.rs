@@ -1,5 +1,5 @@
 //! Image-quality metrics: full-reference (PSNR, SSIM, MS-SSIM and their GT-mean variants),
-//! the lightness-order error of an enhancement, and the no-reference DE and EME.
+//! the lightness-order error of an enhancement, and the no-reference DE, EME and NIQE.
 //!
 //! The conventions are those of the reference table in `shared/data/README.md`, so that
 //! figures measured here can be set beside it; `tests/metrics.rs` reproduces that table's
@@ -14,6 +14,7 @@
 //!   and EME, rounded to 8 bits for DE.
 //! * GT-mean: the image scaled so its mean luma equals the reference's ([`gt_mean`]).
 //! * LOE, DE, EME: see [`loe`], [`de`], [`eme`].
+//! * NIQE: LIVE's MATLAB release and pristine model, 96×96 patches ([`niqe`]).
 //!
 //! A differentiable SSIM / MS-SSIM loss on `f32` images for the encoder lives beside them
 //! ([`ssim_loss_grad`], [`ms_ssim_loss_grad`]); it shares the window and the per-scale
@@ -24,12 +25,14 @@
 mod enhancement;
 mod filter;
 mod loss;
+mod niqe;
 mod psnr;
 mod ssim;
 
 pub use enhancement::{de, eme, gt_mean, loe, luma, EME_BLOCK, EME_EPS, LOE_ROWS};
 pub use filter::Real;
 pub use loss::{ms_ssim_loss_grad, ssim_loss_grad, LossWorkspace};
+pub use niqe::{niqe, NIQE_PATCH};
 pub use psnr::psnr;
 pub use ssim::{ms_ssim, ssim, MS_SSIM_WEIGHTS};
 
@@ -94,7 +97,7 @@ pub enum MetricError {
         reference: (u32, u32),
         image: (u32, u32),
     },
-    /// An image is smaller than the metric's window (SSIM needs 11×11).
+    /// An image is smaller than the metric's window (SSIM needs 11×11, NIQE 96×96).
     TooSmall { width: u32, height: u32, min: u32 },
 }
 
@@ -115,7 +118,7 @@ impl fmt::Display for MetricError {
             ),
             MetricError::TooSmall { width, height, min } => write!(
                 f,
-                "image is {width}x{height}, SSIM needs at least {min}x{min} pixels"
+                "image is {width}x{height}, the metric needs at least {min}x{min} pixels"
             ),
         }
     }
@@ -147,6 +150,8 @@ pub struct Report {
 pub struct NoRefReport {
     pub de: f64,
     pub eme: f64,
+    /// [`niqe`]; `None` for an image smaller than one 96×96 patch.
+    pub niqe: Option<f64>,
 }
 
 /// Every metric of `image` against `reference`.
@@ -170,11 +175,12 @@ pub fn full_reference(reference: Rgb8<'_>, image: Rgb8<'_>) -> Result<Report, Me
     })
 }
 
-/// The metrics that need no reference: DE and EME.
+/// The metrics that need no reference: DE, EME and NIQE.
 pub fn no_reference(image: Rgb8<'_>) -> NoRefReport {
     NoRefReport {
         de: de(image),
         eme: eme(image),
+        niqe: niqe(image).ok(),
     }
 }
 

@@ -20,7 +20,7 @@ pub struct Args {
         conflicts_with = "no_reference"
     )]
     image: Option<PathBuf>,
-    /// Measure REF alone: DE and EME.
+    /// Measure REF alone: DE, EME and NIQE (NIQE only for images of at least 96×96).
     #[arg(long)]
     no_reference: bool,
     /// Print JSON instead of text. An infinite PSNR (identical images) is `null`.
@@ -54,7 +54,9 @@ pub fn run(args: Args) -> Result<(), Failure> {
     let rows: Vec<(&str, f64, &str)> = match &args.image {
         None => {
             let r = metrics::no_reference(first.view()?);
-            vec![("de", r.de, "bits"), ("eme", r.eme, "")]
+            let mut rows = vec![("de", r.de, "bits"), ("eme", r.eme, "")];
+            rows.extend(r.niqe.map(|v| ("niqe", v, "")));
+            rows
         }
         Some(path) => {
             let second = load(path)?;
