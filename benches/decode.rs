@@ -1,4 +1,5 @@
-//! Decoding benchmarks: bytes to model, and model to pixels on the CPU.
+//! Decoding benchmarks: bytes to model, and model to pixels on the CPU and (when wgpu
+//! finds an adapter) the GPU.
 //!
 //! Scenes come from `gsi::synth::random_scene` at 768×512 with standard deviations of
 //! 0.5 to 8 px, which is what fitted sets of that size look like.
@@ -55,5 +56,41 @@ fn render_cpu(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, parse_dequantize, render_cpu);
+/// The wgpu renderer, end to end (projection and binning on the CPU, upload, dispatch,
+/// read-back), when wgpu finds an adapter. On lavapipe this measures an emulated GPU,
+/// not a GPU.
+#[cfg(feature = "gpu")]
+fn render_gpu(c: &mut Criterion) {
+    let gpu = match gsi::gpu::Gpu::new() {
+        Ok(g) => g,
+        Err(e) => {
+            eprintln!("render_gpu skipped: {e}");
+            return;
+        }
+    };
+    eprintln!("render_gpu on {}", gpu.adapter());
+    let mut group = c.benchmark_group("render_gpu");
+    group
+        .sample_size(20)
+        .warm_up_time(Duration::from_secs(1))
+        .measurement_time(Duration::from_secs(5))
+        .sampling_mode(SamplingMode::Flat);
+    for blend in [Blend::Sum, Blend::Alpha] {
+        for (name, n) in [("10k", 10_000), ("70k", 70_000)] {
+            let scene = random_scene(2, SceneSpec::new(WIDTH, HEIGHT, n, blend));
+            group.bench_function(format!("{}/{name}", blend.name()), |b| {
+                b.iter(|| {
+                    gpu.render(black_box(&scene), WIDTH, HEIGHT)
+                        .expect("renders")
+                })
+            });
+        }
+    }
+    group.finish();
+}
+
+#[cfg(not(feature = "gpu"))]
+fn render_gpu(_: &mut Criterion) {}
+
+criterion_group!(benches, parse_dequantize, render_cpu, render_gpu);
 criterion_main!(benches);

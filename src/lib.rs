@@ -70,6 +70,8 @@ pub mod enhance;
 #[cfg(feature = "encode")]
 pub mod fit;
 pub mod format;
+#[cfg(feature = "gpu")]
+pub mod gpu;
 pub mod metrics;
 pub mod model;
 pub mod render;

@@ -1,5 +1,6 @@
 //! `gsi decode`: render a file to an image at any size.
 
+use crate::encode::DeviceArg;
 use crate::{io, read_gsi, Failure};
 use gsi::format::Limits;
 use std::path::{Path, PathBuf};
@@ -20,6 +21,11 @@ pub struct Args {
     /// Scale factor applied to the stored size, e.g. 2 or 0.5.
     #[arg(long)]
     scale: Option<f64>,
+    /// Where to render: `auto` uses a hardware GPU when there is one (and says so when
+    /// it falls back to the CPU); `gpu` uses any adapter wgpu offers, software ones
+    /// included, and fails when there is none.
+    #[arg(long, value_enum, default_value_t = DeviceArg::Auto)]
+    device: DeviceArg,
 }
 
 /// Output size from the stored size and the requested width/height/scale.
@@ -49,7 +55,29 @@ pub fn run(args: Args) -> Result<(), Failure> {
     let h = &f.records.header;
     let (w, ht) = output_size(h.width, h.height, &args)?;
     Limits::default().check_output(w, ht)?;
-    let image = gsi::render::render(&f.records.to_scene(), w, ht)?;
+    // Refuse an unsupported output format before any rendering (or GPU start-up).
+    encode_image(&[0; 3], 1, 1, &args.output)?;
+    let scene = f.records.to_scene();
+    let image = match args.device {
+        DeviceArg::Cpu => gsi::render::render(&scene, w, ht)?,
+        DeviceArg::Gpu => gsi::gpu::Gpu::new()
+            .map_err(|e| Failure(format!("--device gpu: {e}")))?
+            .render(&scene, w, ht)?,
+        DeviceArg::Auto => match gsi::gpu::Gpu::new_hardware() {
+            Ok(gpu) => match gpu.render(&scene, w, ht) {
+                Ok(image) => image,
+                Err(e) if e.kind() == gsi::format::ErrorKind::LimitExceeded => {
+                    eprintln!("gsi: {e}; decoding on the CPU");
+                    gsi::render::render(&scene, w, ht)?
+                }
+                Err(e) => return Err(e.into()),
+            },
+            Err(e) => {
+                eprintln!("gsi: no GPU ({e}); decoding on the CPU");
+                gsi::render::render(&scene, w, ht)?
+            }
+        },
+    };
     let bytes = encode_image(&image.to_rgb8(), w, ht, &args.output)?;
     io::write_output(&args.output, &bytes)
         .map_err(|e| Failure(format!("{}: {e}", args.output.display())))

@@ -1,0 +1,93 @@
+// Forward rasterization of projected 2D Gaussians: one workgroup per 16×16 tile, one
+// invocation per pixel, the tile's Gaussians visited in stored order.
+//
+// This is format-spec.md §6.3–6.4, the same per-pixel rule as the CPU renderer
+// (`Projected::alpha_at` and `render::cpu`), evaluated in f32 in the same order. Only
+// `exp` may round differently on a GPU, which is why GPU and CPU agree to 1/255 rather
+// than bit for bit. Projection (covariance clamps, conic, pixel box) and binning are done
+// once on the CPU by `render::project`, so every renderer shares them.
+
+const TILE: u32 = 16u;
+const ALPHA_MIN: f32 = 0.003921569; // 1/255, as render::ALPHA_MIN
+const ALPHA_MAX: f32 = 0.99;
+const TRANSMITTANCE_MIN: f32 = 0.0001;
+
+struct Params {
+    width: u32,
+    height: u32,
+    tiles_x: u32,
+    // 0 = sum, 1 = alpha (spec §6.4)
+    blend: u32,
+    // First tile row of this band; its output starts at pixel row `tile_row0 * TILE`.
+    tile_row0: u32,
+    // Pixel rows in this band's output.
+    rows: u32,
+    _pad0: u32,
+    _pad1: u32,
+}
+
+@group(0) @binding(0) var<uniform> params: Params;
+// Three vec4 per Gaussian: (mx, my, A, B), (C, opacity, r, g), (b, -, -, -).
+@group(0) @binding(1) var<storage, read> gaussians: array<vec4<f32>>;
+// Pixel box per Gaussian: (x0, y0, x1, y1), inclusive.
+@group(0) @binding(2) var<storage, read> boxes: array<vec4<u32>>;
+// Tile t of the band lists indices[offsets[t] .. offsets[t + 1]].
+@group(0) @binding(3) var<storage, read> offsets: array<u32>;
+@group(0) @binding(4) var<storage, read> indices: array<u32>;
+// RGB per pixel of the band, row-major.
+@group(0) @binding(5) var<storage, read_write> out_rgb: array<f32>;
+
+@compute @workgroup_size(16, 16, 1)
+fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>) {
+    let i = wg.x * TILE + lid.x;
+    let band_row = wg.y * TILE + lid.y;
+    let j = params.tile_row0 * TILE + band_row;
+    if (i >= params.width || band_row >= params.rows || j >= params.height) {
+        return;
+    }
+    let tile = wg.y * params.tiles_x + wg.x;
+    let first = offsets[tile];
+    let last = offsets[tile + 1u];
+    let cx = f32(i) + 0.5;
+    let cy = f32(j) + 0.5;
+    var acc = vec3<f32>(0.0, 0.0, 0.0);
+    var t = 1.0;
+    for (var k = first; k < last; k = k + 1u) {
+        let g = indices[k];
+        let b = boxes[g];
+        if (i < b.x || i > b.z || j < b.y || j > b.w) {
+            continue;
+        }
+        let p0 = gaussians[3u * g];
+        let p1 = gaussians[3u * g + 1u];
+        let p2 = gaussians[3u * g + 2u];
+        let dx = cx - p0.x;
+        let dy = cy - p0.y;
+        let power = -0.5 * (p0.z * dx * dx + p1.x * dy * dy) - p0.w * dx * dy;
+        if (power > 0.0) {
+            continue;
+        }
+        var alpha = p1.y * exp(power);
+        let color = vec3<f32>(p1.z, p1.w, p2.x);
+        if (params.blend == 0u) {
+            if (alpha < ALPHA_MIN) {
+                continue;
+            }
+            acc = acc + color * alpha;
+        } else {
+            alpha = min(alpha, ALPHA_MAX);
+            if (alpha < ALPHA_MIN) {
+                continue;
+            }
+            acc = acc + color * alpha * t;
+            t = t * (1.0 - alpha);
+            if (t < TRANSMITTANCE_MIN) {
+                break;
+            }
+        }
+    }
+    let o = 3u * (band_row * params.width + i);
+    out_rgb[o] = acc.x;
+    out_rgb[o + 1u] = acc.y;
+    out_rgb[o + 2u] = acc.z;
+}

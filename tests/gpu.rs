@@ -1,0 +1,104 @@
+//! The wgpu renderer against the CPU renderer. Runs wherever wgpu finds an adapter (CI:
+//! lavapipe from `mesa-vulkan-drivers`); with `GSI_REQUIRE_GPU=1` a missing adapter is a
+//! failure rather than a skip, so CI cannot pass without running these.
+#![cfg(feature = "gpu")]
+
+mod common;
+
+use gsi::format::{read_file, Limits};
+use gsi::gpu::Gpu;
+use gsi::model::Blend;
+use gsi::synth::{random_scene, SceneSpec};
+
+fn gpu() -> Option<Gpu> {
+    match Gpu::new() {
+        Ok(g) => {
+            eprintln!("adapter: {}", g.adapter());
+            Some(g)
+        }
+        Err(e) if std::env::var_os("GSI_REQUIRE_GPU").is_some() => {
+            panic!("GSI_REQUIRE_GPU is set but {e}")
+        }
+        Err(e) => {
+            eprintln!("skipped: {e}");
+            None
+        }
+    }
+}
+
+/// Largest difference of the 8-bit outputs.
+fn max_diff(a: &gsi::render::RgbImage, b: &gsi::render::RgbImage) -> u8 {
+    a.to_rgb8()
+        .iter()
+        .zip(b.to_rgb8())
+        .map(|(x, y)| x.abs_diff(y))
+        .max()
+        .unwrap_or(0)
+}
+
+#[test]
+fn gpu_matches_cpu_on_the_corpus_within_one_level() {
+    let Some(gpu) = gpu() else { return };
+    let mut blends = [0, 0];
+    for path in common::corpus("valid") {
+        let file = read_file(std::fs::File::open(&path).unwrap(), Limits::default()).unwrap();
+        let scene = file.records.to_scene();
+        blends[(scene.blend == Blend::Alpha) as usize] += 1;
+        let (w, h) = (scene.width, scene.height);
+        for (ow, oh) in [(w, h), (2 * w, 2 * h), (w.div_ceil(3), h.div_ceil(3))] {
+            let cpu = gsi::render::render(&scene, ow, oh).unwrap();
+            let gpu_img = gpu.render(&scene, ow, oh).unwrap();
+            assert!(gpu_img.data.iter().all(|x| x.is_finite()));
+            let d = max_diff(&cpu, &gpu_img);
+            assert!(
+                d <= 1,
+                "{} at {ow}x{oh}: differs by {d}/255",
+                path.display()
+            );
+        }
+    }
+    assert!(
+        blends[0] > 3 && blends[1] > 3,
+        "both blend modes covered: {blends:?}"
+    );
+}
+
+#[test]
+fn bands_split_by_the_binding_limit_give_the_same_image() {
+    let Some(mut gpu) = gpu() else { return };
+    for blend in [Blend::Sum, Blend::Alpha] {
+        let scene = random_scene(3, SceneSpec::new(200, 150, 2000, blend));
+        let whole = gpu.render(&scene, 200, 150).unwrap();
+        let cpu = gsi::render::render(&scene, 200, 150).unwrap();
+        assert!(max_diff(&whole, &cpu) <= 1);
+        // Room for two tile rows of output: ten bands.
+        let mut small = Gpu::new().unwrap();
+        small.limit_bindings(200 * 16 * 12 * 2 + 64 * 1024);
+        let banded = small.render(&scene, 200, 150).unwrap();
+        assert_eq!(banded.data, whole.data, "{blend:?}");
+        // A limit below one tile row's output is refused with a clear error.
+        small.limit_bindings(1000);
+        let e = small.render(&scene, 200, 150).unwrap_err();
+        assert_eq!(e.kind(), gsi::format::ErrorKind::LimitExceeded);
+        gpu.limit_bindings(u64::MAX);
+    }
+}
+
+#[test]
+fn empty_and_tiny_scenes() {
+    let Some(gpu) = gpu() else { return };
+    let empty = random_scene(1, SceneSpec::new(10, 7, 0, Blend::Sum));
+    assert!(gpu
+        .render(&empty, 10, 7)
+        .unwrap()
+        .data
+        .iter()
+        .all(|&x| x == 0.0));
+    let one = random_scene(2, SceneSpec::new(1, 1, 1, Blend::Alpha));
+    let (a, b) = (
+        gpu.render(&one, 1, 1).unwrap(),
+        gsi::render::render(&one, 1, 1).unwrap(),
+    );
+    assert!(max_diff(&a, &b) <= 1);
+    assert!(gpu.render(&one, 0, 5).is_err());
+}
