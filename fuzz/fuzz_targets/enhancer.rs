@@ -25,13 +25,21 @@ fuzz_target!(|data: &[u8]| {
 
     let e = Enhancer::from_record(&record);
     let positions = [[0.5, 0.5], [0.0, 1.0], [-3.0, 7.0], [f32::NAN, 0.25]];
-    let colors = [[0.1, 0.2, 0.3], [1.0, 0.0, -1.0], [64.0, -64.0, 0.0], [0.0; 3]];
+    let colors = [
+        [0.1, 0.2, 0.3],
+        [1.0, 0.0, -1.0],
+        [64.0, -64.0, 0.0],
+        [0.0; 3],
+    ];
     for (out, c) in e.apply(&positions, &colors).iter().zip(colors) {
         for (o, c) in out.iter().zip(c) {
             // A convex mix of c (identity) and values clamped to the operator range.
             let (lo, hi) = (e.clamp[0].min(c), e.clamp[1].max(c));
             assert!(o.is_finite(), "{out:?}");
-            assert!(*o >= lo - 1e-3 * lo.abs().max(1.0) && *o <= hi + 1e-3 * hi.abs().max(1.0), "{o} outside [{lo}, {hi}]");
+            assert!(
+                *o >= lo - 1e-3 * lo.abs().max(1.0) && *o <= hi + 1e-3 * hi.abs().max(1.0),
+                "{o} outside [{lo}, {hi}]"
+            );
         }
     }
 });
