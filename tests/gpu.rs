@@ -102,3 +102,58 @@ fn empty_and_tiny_scenes() {
     assert!(max_diff(&a, &b) <= 1);
     assert!(gpu.render(&one, 0, 5).is_err());
 }
+
+#[cfg(feature = "cli")]
+#[test]
+fn cli_decode_on_the_gpu_and_a_missing_adapter() {
+    let Some(_) = gpu() else { return };
+    let file = common::corpus("valid")
+        .into_iter()
+        .find(|p| p.to_string_lossy().contains("alpha-lsr-500"))
+        .unwrap();
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("gpu-cli");
+    std::fs::create_dir_all(&dir).unwrap();
+    // Mesa's window-system probe complains on stderr when this is unset.
+    let xdg = dir.join("xdg");
+    std::fs::create_dir_all(&xdg).unwrap();
+    let run = |device: &str, out: &str, env: &[(&str, &str)]| {
+        let mut cmd = std::process::Command::new(env!("CARGO_BIN_EXE_gsi"));
+        cmd.args([
+            "decode",
+            file.to_str().unwrap(),
+            "--scale",
+            "2",
+            "--device",
+            device,
+            "-o",
+        ])
+        .arg(dir.join(out))
+        .env("XDG_RUNTIME_DIR", &xdg);
+        for (k, v) in env {
+            cmd.env(k, v);
+        }
+        cmd.output().unwrap()
+    };
+    assert!(run("gpu", "g.png", &[]).status.success());
+    assert!(run("cpu", "c.png", &[]).status.success());
+    // The two PNGs agree to at most one level per value: PSNR above 48 dB.
+    let cmp = std::process::Command::new(env!("CARGO_BIN_EXE_gsi"))
+        .args(["compare", "--json"])
+        .arg(dir.join("c.png"))
+        .arg(dir.join("g.png"))
+        .output()
+        .unwrap();
+    assert!(cmp.status.success());
+    let json: serde_json::Value = serde_json::from_slice(&cmp.stdout).unwrap();
+    let psnr = json["psnr"].as_f64().unwrap_or(f64::INFINITY); // null: identical
+    assert!(psnr > 48.0, "GPU and CPU PNGs differ: {psnr} dB");
+    let out = run(
+        "gpu",
+        "none.png",
+        &[("WGPU_ADAPTER_NAME", "no-such-adapter-anywhere")],
+    );
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("no adapter named like"), "{err}");
+    assert!(!dir.join("none.png").exists());
+}

@@ -25,19 +25,20 @@ struct Row {
     encode_s: f64,
     enhance_s: f64,
     luma: (f32, f32),
-    /// psnr, ssim, psnr_gm, ssim_gm, loe, de, eme
-    gsi: [f64; 7],
+    /// psnr, ssim, psnr_gm, ssim_gm, loe, de, eme, niqe
+    gsi: [f64; 8],
     /// The same figures with the paper's exposure target, 0.7.
-    paper_exposure: [f64; 7],
+    paper_exposure: [f64; 8],
     /// The same figures for auto-gamma on the raw low image (mean grey to 0.5).
-    auto_gamma: [f64; 7],
+    auto_gamma: [f64; 8],
 }
 
-fn figures(low: &[u8], high: &[u8], out: &[u8], w: u32, h: u32) -> [f64; 7] {
+fn figures(low: &[u8], high: &[u8], out: &[u8], w: u32, h: u32) -> [f64; 8] {
     let rgb = |d| Rgb8::new(w, h, d).expect("sizes match");
     let r = metrics::full_reference(rgb(high), rgb(out)).expect("scores");
     let loe = metrics::loe(rgb(low), rgb(out)).expect("loe");
-    [r.psnr, r.ssim, r.psnr_gm, r.ssim_gm, loe, r.de, r.eme]
+    let niqe = metrics::niqe(rgb(out)).expect("600x400 holds NIQE patches");
+    [r.psnr, r.ssim, r.psnr_gm, r.ssim_gm, loe, r.de, r.eme, niqe]
 }
 
 fn auto_gamma(low: &[u8], w: u32, h: u32) -> Vec<u8> {
@@ -135,7 +136,7 @@ pub fn section(lol: &Path, out_dir: &Path, limit: usize) {
             "enhanced_bytes": r.kept_bytes, "enhanced_bytes_discard_original": r.discarded_bytes,
             "encode_s": r.encode_s, "enhance_s": r.enhance_s, "mean_luma": [r.luma.0, r.luma.1],
             "psnr": r.gsi[0], "ssim": r.gsi[1], "psnr_gm": r.gsi[2], "ssim_gm": r.gsi[3],
-            "loe": r.gsi[4], "de": r.gsi[5], "eme": r.gsi[6],
+            "loe": r.gsi[4], "de": r.gsi[5], "eme": r.gsi[6], "niqe": r.gsi[7],
             "auto_gamma": r.auto_gamma, "paper_exposure_0_7": r.paper_exposure,
         })).collect::<Vec<_>>(),
     });
@@ -149,7 +150,7 @@ pub fn section(lol: &Path, out_dir: &Path, limit: usize) {
 
 fn markdown(rows: &[Row], opts: &EnhanceOptions, stamp: &(String, String)) -> String {
     let mut s = String::new();
-    let m = |k: usize, f: fn(&Row) -> &[f64; 7]| mean(rows.iter().map(|r| f(r)[k]));
+    let m = |k: usize, f: fn(&Row) -> &[f64; 8]| mean(rows.iter().map(|r| f(r)[k]));
     let _ = writeln!(
         s,
         "## Stage 2: low-light enhancement in the container (LOL eval15)\n\n\
@@ -161,38 +162,43 @@ fn markdown(rows: &[Row], opts: &EnhanceOptions, stamp: &(String, String)) -> St
          Reference rows are that README's, measured on the raw images.\n",
         stamp.0, stamp.1, rows.len(), opts.iterations, opts.experts, opts.hidden, opts.work_side, opts.params.exposure_target
     );
-    let _ = writeln!(s, "| method | PSNR | SSIM | PSNR-gm | SSIM-gm | LOE | DE | EME |\n|---|---|---|---|---|---|---|---|");
     let _ = writeln!(
         s,
-        "| **gsi** (encode {BPP} bpp → enhance → decode) | **{:.2}** | **{:.3}** | {:.2} | {:.3} | {:.1} | {:.2} | {:.1} |",
-        m(0, |r| &r.gsi), m(1, |r| &r.gsi), m(2, |r| &r.gsi), m(3, |r| &r.gsi), m(4, |r| &r.gsi), m(5, |r| &r.gsi), m(6, |r| &r.gsi)
+        "| method | PSNR | SSIM | PSNR-gm | SSIM-gm | LOE | DE | EME | NIQE |\n|---|---|---|---|---|---|---|---|---|"
     );
-    let _ = writeln!(
-        s,
-        "| gsi with the paper's exposure target E = 0.7 | {:.2} | {:.3} | {:.2} | {:.3} | {:.1} | {:.2} | {:.1} |",
-        m(0, |r| &r.paper_exposure), m(1, |r| &r.paper_exposure), m(2, |r| &r.paper_exposure), m(3, |r| &r.paper_exposure),
-        m(4, |r| &r.paper_exposure), m(5, |r| &r.paper_exposure), m(6, |r| &r.paper_exposure)
+    let measured = |s: &mut String, label: &str, f: fn(&Row) -> &[f64; 8]| {
+        let v: Vec<f64> = (0..8).map(|k| m(k, f)).collect();
+        let _ = writeln!(
+            s,
+            "| {label} | {:.2} | {:.3} | {:.2} | {:.3} | {:.1} | {:.2} | {:.1} | {:.2} |",
+            v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7]
+        );
+    };
+    measured(
+        &mut s,
+        &format!("**gsi** (encode {BPP} bpp → enhance → decode)"),
+        |r| &r.gsi,
     );
-    let _ = writeln!(
-        s,
-        "| auto-gamma, measured here | {:.2} | {:.3} | {:.2} | {:.3} | {:.1} | {:.2} | {:.1} |",
-        m(0, |r| &r.auto_gamma),
-        m(1, |r| &r.auto_gamma),
-        m(2, |r| &r.auto_gamma),
-        m(3, |r| &r.auto_gamma),
-        m(4, |r| &r.auto_gamma),
-        m(5, |r| &r.auto_gamma),
-        m(6, |r| &r.auto_gamma)
+    measured(
+        &mut s,
+        "gsi with the paper's exposure target E = 0.7",
+        |r| &r.paper_exposure,
     );
+    measured(&mut s, "auto-gamma, measured here", |r| &r.auto_gamma);
     for line in [
-        "| input (no enhancement), README | 7.77 | 0.195 | 18.78 | 0.492 | 0 | 4.76 | 43.1 |",
-        "| gamma 0.4, README | 14.59 | 0.621 | 22.25 | 0.634 | 50.2 | 6.20 | 39.3 |",
-        "| auto-gamma, README | 16.33 | 0.631 | 19.60 | 0.650 | 68.7 | 6.26 | 38.7 |",
-        "| CLAHE, README | 10.17 | 0.435 | 17.67 | 0.487 | 444.5 | 6.05 | 19.7 |",
-        "| Zero-DCE++, README | 15.16 | 0.566 | 19.49 | 0.531 | 232.9 | 6.79 | 45.4 |",
+        "| input (no enhancement), README | 7.77 | 0.195 | 18.78 | 0.492 | 0 | 4.76 | 43.1 | – |",
+        "| gamma 0.4, README | 14.59 | 0.621 | 22.25 | 0.634 | 50.2 | 6.20 | 39.3 | – |",
+        "| auto-gamma, README | 16.33 | 0.631 | 19.60 | 0.650 | 68.7 | 6.26 | 38.7 | – |",
+        "| CLAHE, README | 10.17 | 0.435 | 17.67 | 0.487 | 444.5 | 6.05 | 19.7 | – |",
+        "| Zero-DCE++, README | 15.16 | 0.566 | 19.49 | 0.531 | 232.9 | 6.79 | 45.4 | – |",
     ] {
         let _ = writeln!(s, "{line}");
     }
+    let _ = writeln!(
+        s,
+        "\nNIQE (lower is better) is `gsi::metrics::niqe` with LIVE's pristine model (`data/niqe`); the README \
+         measured none, so its rows have no NIQE."
+    );
     let med = |f: fn(&Row) -> f64| median(rows.iter().map(f).collect());
     let _ = writeln!(
         s,
@@ -211,15 +217,15 @@ fn markdown(rows: &[Row], opts: &EnhanceOptions, stamp: &(String, String)) -> St
     let _ = writeln!(
         s,
         "![input / gsi / reference](bench/enhance_examples.jpg)\n\n![per-image PSNR](bench/enhance_per_image.svg)\n\n\
-         | image | N | Cr (stage 1) | mean luma in → out | enhance s | PSNR | SSIM | PSNR-gm | SSIM-gm | LOE | DE | EME | auto-gamma PSNR / SSIM |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|---|---|"
+         | image | N | Cr (stage 1) | mean luma in → out | enhance s | PSNR | SSIM | PSNR-gm | SSIM-gm | LOE | DE | EME | NIQE | auto-gamma PSNR / SSIM |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
     );
     for r in rows {
         let g = &r.gsi;
         let _ = writeln!(
             s,
-            "| {} | {} | {:.1}× | {:.3} → {:.3} | {:.1} | {:.2} | {:.3} | {:.2} | {:.3} | {:.1} | {:.2} | {:.1} | {:.2} / {:.3} |",
-            r.image, r.gaussians, r.cr_bytes, r.luma.0, r.luma.1, r.enhance_s, g[0], g[1], g[2], g[3], g[4], g[5], g[6],
+            "| {} | {} | {:.1}× | {:.3} → {:.3} | {:.1} | {:.2} | {:.3} | {:.2} | {:.3} | {:.1} | {:.2} | {:.1} | {:.2} | {:.2} / {:.3} |",
+            r.image, r.gaussians, r.cr_bytes, r.luma.0, r.luma.1, r.enhance_s, g[0], g[1], g[2], g[3], g[4], g[5], g[6], g[7],
             r.auto_gamma[0], r.auto_gamma[1]
         );
     }
