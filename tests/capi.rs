@@ -22,7 +22,11 @@ fn build_staticlib() -> PathBuf {
             "--features",
             "capi,parallel",
             "--message-format=json",
+            // Its own target folder: built in the shared one, the lean `libgsi.rlib`
+            // would replace the full one that the doctests link against afterwards.
+            "--target-dir",
         ])
+        .arg(Path::new(env!("CARGO_TARGET_TMPDIR")).join("capi-build"))
         .output()
         .unwrap();
     assert!(
