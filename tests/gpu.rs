@@ -157,3 +157,49 @@ fn cli_decode_on_the_gpu_and_a_missing_adapter() {
     assert!(err.contains("no adapter named like"), "{err}");
     assert!(!dir.join("none.png").exists());
 }
+
+/// The `sum` backward pass on the GPU against `fit::raster::backward`: relative error of
+/// each kind of gradient (mean, conic, opacity, colour) at most 1e-3.
+#[cfg(feature = "encode")]
+#[test]
+fn sum_gradients_match_the_cpu() {
+    use gsi::fit::raster::{backward, forward, Need};
+    let Some(gpu) = gpu() else { return };
+    let (w, h) = (96, 64);
+    let scene = random_scene(11, SceneSpec::new(w, h, 400, Blend::Sum));
+    let proj = gsi::render::project_scene(&scene, w, h);
+    let fwd = forward(&proj, Blend::Sum, w, h);
+    let mut rng = gsi::synth::SplitMix64::new(5);
+    let n = fwd.image.len() as f32;
+    let dl: Vec<f32> = fwd
+        .image
+        .iter()
+        .map(|&x| 2.0 * (x - rng.unit()) / n)
+        .collect();
+    let cpu = backward(&fwd, &proj, &dl, Need::All);
+    let gpu_grads = gpu.backward_sum(&proj, w, h, &dl).unwrap();
+    assert_eq!(cpu.len(), gpu_grads.len());
+    let kinds: [(&str, std::ops::Range<usize>); 4] = [
+        ("mean", 0..2),
+        ("conic", 2..5),
+        ("opacity", 5..6),
+        ("colour", 6..9),
+    ];
+    for (name, range) in kinds {
+        let (mut diff, mut norm) = (0f64, 0f64);
+        for (c, g) in cpu.iter().zip(&gpu_grads) {
+            let c = [
+                c.mean[0], c.mean[1], c.conic[0], c.conic[1], c.conic[2], c.opacity, c.color[0],
+                c.color[1], c.color[2],
+            ];
+            for k in range.clone() {
+                assert!(g[k].is_finite());
+                diff += f64::from(g[k] - c[k]).powi(2);
+                norm += f64::from(c[k]).powi(2);
+            }
+        }
+        let rel = (diff / norm.max(1e-30)).sqrt();
+        eprintln!("{name}: relative error {rel:.2e}");
+        assert!(norm > 0.0 && rel <= 1e-3, "{name}: relative error {rel}");
+    }
+}

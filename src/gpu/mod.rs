@@ -31,8 +31,8 @@ impl std::error::Error for GpuError {}
 pub struct Gpu {
     device: wgpu::Device,
     queue: wgpu::Queue,
-    pipeline: wgpu::ComputePipeline,
-    layout: wgpu::BindGroupLayout,
+    render: Kernel,
+    backward_sum: Kernel,
     info: wgpu::AdapterInfo,
     /// Largest storage binding, bytes.
     max_binding: u64,
@@ -80,61 +80,28 @@ impl Gpu {
             ..Default::default()
         }))
         .map_err(|e| GpuError(format!("{}: {e}", info.name)))?;
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("render.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("../../shaders/render.wgsl").into()),
-        });
-        let storage = |binding, read_only| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Storage { read_only },
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
-        };
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("render"),
-            entries: &[
-                wgpu::BindGroupLayoutEntry {
-                    binding: 0,
-                    visibility: wgpu::ShaderStages::COMPUTE,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Uniform,
-                        has_dynamic_offset: false,
-                        min_binding_size: None,
-                    },
-                    count: None,
-                },
-                storage(1, true),
-                storage(2, true),
-                storage(3, true),
-                storage(4, true),
-                storage(5, false),
-            ],
-        });
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("render"),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
-        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("render"),
-            layout: Some(&pipeline_layout),
-            module: &module,
-            entry_point: Some("main"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
+        // Binding 0 is the uniform block; the others are storage buffers, read-only
+        // except the last (the output).
+        let render = Kernel::new(
+            &device,
+            "render",
+            include_str!("../../shaders/render.wgsl"),
+            6,
+        );
+        let backward_sum = Kernel::new(
+            &device,
+            "backward_sum",
+            include_str!("../../shaders/backward_sum.wgsl"),
+            7,
+        );
         let max_binding = limits
             .max_storage_buffer_binding_size
             .min(limits.max_buffer_size);
         Ok(Gpu {
             device,
             queue,
-            pipeline,
-            layout,
+            render,
+            backward_sum,
             info,
             max_binding,
         })
@@ -251,29 +218,7 @@ impl Gpu {
         rows: std::ops::Range<u32>,
         out: &mut [f32],
     ) -> Result<()> {
-        let band_tiles = (tiles_x * (rows.end - rows.start)) as usize;
-        let mut counts = vec![0u32; band_tiles + 1];
-        for g in proj {
-            for ty in (g.bbox.y0 / TILE).max(rows.start)..=(g.bbox.y1 / TILE).min(rows.end - 1) {
-                for tx in g.bbox.x0 / TILE..=g.bbox.x1 / TILE {
-                    counts[((ty - rows.start) * tiles_x + tx) as usize + 1] += 1;
-                }
-            }
-        }
-        for t in 1..counts.len() {
-            counts[t] += counts[t - 1];
-        }
-        let mut fill = counts.clone();
-        let mut indices = vec![0u32; counts[band_tiles] as usize];
-        for (k, g) in proj.iter().enumerate() {
-            for ty in (g.bbox.y0 / TILE).max(rows.start)..=(g.bbox.y1 / TILE).min(rows.end - 1) {
-                for tx in g.bbox.x0 / TILE..=g.bbox.x1 / TILE {
-                    let t = ((ty - rows.start) * tiles_x + tx) as usize;
-                    indices[fill[t] as usize] = k as u32;
-                    fill[t] += 1;
-                }
-            }
-        }
+        let (offsets, indices) = tile_lists(proj, tiles_x, rows.clone());
         let params = Params {
             width,
             height,
@@ -286,16 +231,83 @@ impl Gpu {
             rows: (out.len() / (width as usize * 3)) as u32,
             _pad: [0; 2],
         };
-        let p_buf = self
-            .device
+        let inputs = [
+            self.uniform(bytemuck::bytes_of(&params)),
+            g_buf.clone(),
+            b_buf.clone(),
+            self.storage(bytemuck::cast_slice(&offsets)),
+            self.storage(bytemuck::cast_slice(&indices)),
+        ];
+        self.run(&self.render, &inputs, (tiles_x, rows.end - rows.start), out)
+    }
+
+    /// Gradients of a loss with respect to each projected Gaussian of a `sum` scene,
+    /// given `dl_dimage` (`width·height·3`): per Gaussian `[d mean (2), d conic (3),
+    /// d opacity, d colour (3)]`, the quantities `fit::raster::backward` returns. Tile
+    /// lists are summed in tile order, as on the CPU.
+    pub fn backward_sum(
+        &self,
+        proj: &[Projected],
+        width: u32,
+        height: u32,
+        dl_dimage: &[f32],
+    ) -> Result<Vec<[f32; 9]>> {
+        assert_eq!(dl_dimage.len(), width as usize * height as usize * 3);
+        let tiles_x = width.div_ceil(TILE);
+        let tiles_y = height.div_ceil(TILE);
+        let (offsets, indices) = tile_lists(proj, tiles_x, 0..tiles_y);
+        let mut slots = vec![0.0f32; indices.len() * 9];
+        if proj.is_empty() || indices.is_empty() {
+            return Ok(vec![[0.0; 9]; proj.len()]);
+        }
+        for bytes in [
+            slots.len() as u64 * 4,
+            dl_dimage.len() as u64 * 4,
+            indices.len() as u64 * 4,
+        ] {
+            if bytes > self.max_binding {
+                return Err(too_big(&self.info, "the backward pass of this image"));
+            }
+        }
+        let (gaussians, boxes) = upload_layout(proj);
+        let params = [width, height, tiles_x, 0u32];
+        let inputs = [
+            self.uniform(bytemuck::cast_slice(&params)),
+            self.storage(bytemuck::cast_slice(&gaussians)),
+            self.storage(bytemuck::cast_slice(&boxes)),
+            self.storage(bytemuck::cast_slice(&offsets)),
+            self.storage(bytemuck::cast_slice(&indices)),
+            self.storage(bytemuck::cast_slice(dl_dimage)),
+        ];
+        self.run(&self.backward_sum, &inputs, (tiles_x, tiles_y), &mut slots)?;
+        let mut out = vec![[0.0f32; 9]; proj.len()];
+        for (k, slot) in indices.iter().zip(slots.chunks_exact(9)) {
+            for (o, s) in out[*k as usize].iter_mut().zip(slot) {
+                *o += s;
+            }
+        }
+        Ok(out)
+    }
+
+    fn uniform(&self, bytes: &[u8]) -> wgpu::Buffer {
+        self.device
             .create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: None,
-                contents: bytemuck::bytes_of(&params),
+                contents: bytes,
                 usage: wgpu::BufferUsages::UNIFORM,
-            });
-        let o_buf = self.storage(bytemuck::cast_slice(&counts));
-        let i_buf = self.storage(bytemuck::cast_slice(&indices));
-        let out_bytes = (out.len() * 4) as u64;
+            })
+    }
+
+    /// Bind `inputs` then an output buffer the size of `out`, dispatch `groups`
+    /// workgroups of `kernel`, and read the output back into `out`.
+    fn run(
+        &self,
+        kernel: &Kernel,
+        inputs: &[wgpu::Buffer],
+        groups: (u32, u32),
+        out: &mut [f32],
+    ) -> Result<()> {
+        let out_bytes = (out.len().max(4) * 4) as u64;
         let out_buf = self.device.create_buffer(&wgpu::BufferDescriptor {
             label: None,
             size: out_bytes,
@@ -308,44 +320,28 @@ impl Gpu {
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
+        let entries: Vec<wgpu::BindGroupEntry> = inputs
+            .iter()
+            .chain(std::iter::once(&out_buf))
+            .enumerate()
+            .map(|(binding, b)| wgpu::BindGroupEntry {
+                binding: binding as u32,
+                resource: b.as_entire_binding(),
+            })
+            .collect();
         let bind = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: None,
-            layout: &self.layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: p_buf.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: g_buf.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: b_buf.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: o_buf.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 4,
-                    resource: i_buf.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 5,
-                    resource: out_buf.as_entire_binding(),
-                },
-            ],
+            layout: &kernel.layout,
+            entries: &entries,
         });
         let mut enc = self
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
         {
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
-            pass.set_pipeline(&self.pipeline);
+            pass.set_pipeline(&kernel.pipeline);
             pass.set_bind_group(0, &bind, &[]);
-            pass.dispatch_workgroups(tiles_x, rows.end - rows.start, 1);
+            pass.dispatch_workgroups(groups.0, groups.1, 1);
         }
         enc.copy_buffer_to_buffer(&out_buf, 0, &read_buf, 0, out_bytes);
         self.queue.submit([enc.finish()]);
@@ -357,24 +353,112 @@ impl Gpu {
         self.device
             .poll(wgpu::PollType::wait_indefinitely())
             .map_err(|e| Error::new(ErrorKind::Io, format!("GPU: {e}")))?;
-        match rx.recv() {
-            Ok(Ok(())) => {}
-            _ => {
-                return Err(Error::new(
-                    ErrorKind::Io,
-                    "GPU: reading the result back failed",
-                ))
-            }
+        if !matches!(rx.recv(), Ok(Ok(()))) {
+            return Err(Error::new(
+                ErrorKind::Io,
+                "GPU: reading the result back failed",
+            ));
         }
         {
             let view = slice
                 .get_mapped_range()
                 .map_err(|e| Error::new(ErrorKind::Io, format!("GPU: {e}")))?;
-            out.copy_from_slice(bytemuck::cast_slice(&view));
+            let values: &[f32] = bytemuck::cast_slice(&view);
+            out.copy_from_slice(&values[..out.len()]);
         }
         read_buf.unmap();
         Ok(())
     }
+}
+
+/// A compute pipeline and the layout of its one bind group.
+struct Kernel {
+    pipeline: wgpu::ComputePipeline,
+    layout: wgpu::BindGroupLayout,
+}
+
+impl Kernel {
+    /// Entry point `main` of `source`; binding 0 a uniform block, then storage buffers,
+    /// read-only but for the last, `bindings` in all.
+    fn new(device: &wgpu::Device, label: &str, source: &str, bindings: u32) -> Kernel {
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some(label),
+            source: wgpu::ShaderSource::Wgsl(source.into()),
+        });
+        let entries: Vec<wgpu::BindGroupLayoutEntry> = (0..bindings)
+            .map(|binding| wgpu::BindGroupLayoutEntry {
+                binding,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::Buffer {
+                    ty: if binding == 0 {
+                        wgpu::BufferBindingType::Uniform
+                    } else {
+                        wgpu::BufferBindingType::Storage {
+                            read_only: binding + 1 < bindings,
+                        }
+                    },
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                count: None,
+            })
+            .collect();
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some(label),
+            entries: &entries,
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some(label),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some(label),
+            layout: Some(&pipeline_layout),
+            module: &module,
+            entry_point: Some("main"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        Kernel { pipeline, layout }
+    }
+}
+
+/// Per-tile lists of projected-Gaussian indices (stored order) for tile rows `rows`:
+/// `offsets` (tiles + 1, prefix sums) and the concatenated `indices`.
+fn tile_lists(
+    proj: &[Projected],
+    tiles_x: u32,
+    rows: std::ops::Range<u32>,
+) -> (Vec<u32>, Vec<u32>) {
+    let band_tiles = (tiles_x * (rows.end - rows.start)) as usize;
+    let mut offsets = vec![0u32; band_tiles + 1];
+    let tiles_of = |g: &Projected| {
+        let ys = (g.bbox.y0 / TILE).max(rows.start)..=(g.bbox.y1 / TILE).min(rows.end - 1);
+        let xs = g.bbox.x0 / TILE..=g.bbox.x1 / TILE;
+        let r0 = rows.start;
+        ys.flat_map(move |ty| {
+            xs.clone()
+                .map(move |tx| ((ty - r0) * tiles_x + tx) as usize)
+        })
+    };
+    for g in proj {
+        for t in tiles_of(g) {
+            offsets[t + 1] += 1;
+        }
+    }
+    for t in 1..offsets.len() {
+        offsets[t] += offsets[t - 1];
+    }
+    let mut fill = offsets.clone();
+    let mut indices = vec![0u32; offsets[band_tiles] as usize];
+    for (k, g) in proj.iter().enumerate() {
+        for t in tiles_of(g) {
+            indices[fill[t] as usize] = k as u32;
+            fill[t] += 1;
+        }
+    }
+    (offsets, indices)
 }
 
 fn too_big(info: &wgpu::AdapterInfo, what: &str) -> Error {
