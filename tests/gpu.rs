@@ -158,17 +158,26 @@ fn cli_decode_on_the_gpu_and_a_missing_adapter() {
     assert!(!dir.join("none.png").exists());
 }
 
-/// The `sum` backward pass on the GPU against `fit::raster::backward`: relative error of
-/// each kind of gradient (mean, conic, opacity, colour) at most 1e-3.
+/// The backward pass on the GPU against `fit::raster::backward`, both blend modes and an
+/// edge-cut size: relative error of each kind of gradient (mean, conic, opacity, colour)
+/// at most 1e-3.
 #[cfg(feature = "encode")]
 #[test]
-fn sum_gradients_match_the_cpu() {
+fn gradients_match_the_cpu() {
+    for blend in [Blend::Sum, Blend::Alpha] {
+        for (w, h) in [(96, 64), (50, 37)] {
+            gradients_match(blend, w, h);
+        }
+    }
+}
+
+#[cfg(feature = "encode")]
+fn gradients_match(blend: Blend, w: u32, h: u32) {
     use gsi::fit::raster::{backward, forward, Need};
     let Some(gpu) = gpu() else { return };
-    let (w, h) = (96, 64);
-    let scene = random_scene(11, SceneSpec::new(w, h, 400, Blend::Sum));
+    let scene = random_scene(11, SceneSpec::new(w, h, 400, blend));
     let proj = gsi::render::project_scene(&scene, w, h);
-    let fwd = forward(&proj, Blend::Sum, w, h);
+    let fwd = forward(&proj, blend, w, h);
     let mut rng = gsi::synth::SplitMix64::new(5);
     let n = fwd.image.len() as f32;
     let dl: Vec<f32> = fwd
@@ -177,7 +186,7 @@ fn sum_gradients_match_the_cpu() {
         .map(|&x| 2.0 * (x - rng.unit()) / n)
         .collect();
     let cpu = backward(&fwd, &proj, &dl, Need::All);
-    let gpu_grads = gpu.backward_sum(&proj, w, h, &dl).unwrap();
+    let gpu_grads = gpu.backward(&proj, blend, w, h, &dl).unwrap();
     assert_eq!(cpu.len(), gpu_grads.len());
     let kinds: [(&str, std::ops::Range<usize>); 4] = [
         ("mean", 0..2),
@@ -199,7 +208,10 @@ fn sum_gradients_match_the_cpu() {
             }
         }
         let rel = (diff / norm.max(1e-30)).sqrt();
-        eprintln!("{name}: relative error {rel:.2e}");
-        assert!(norm > 0.0 && rel <= 1e-3, "{name}: relative error {rel}");
+        eprintln!("{blend:?} {w}x{h} {name}: relative error {rel:.2e}");
+        assert!(
+            norm > 0.0 && rel <= 1e-3,
+            "{blend:?} {w}x{h} {name}: relative error {rel}"
+        );
     }
 }

@@ -33,6 +33,7 @@ pub struct Gpu {
     queue: wgpu::Queue,
     render: Kernel,
     backward_sum: Kernel,
+    backward_alpha: Kernel,
     info: wgpu::AdapterInfo,
     /// Largest storage binding, bytes.
     max_binding: u64,
@@ -94,6 +95,12 @@ impl Gpu {
             include_str!("../../shaders/backward_sum.wgsl"),
             7,
         );
+        let backward_alpha = Kernel::new(
+            &device,
+            "backward_alpha",
+            include_str!("../../shaders/backward_alpha.wgsl"),
+            7,
+        );
         let max_binding = limits
             .max_storage_buffer_binding_size
             .min(limits.max_buffer_size);
@@ -102,6 +109,7 @@ impl Gpu {
             queue,
             render,
             backward_sum,
+            backward_alpha,
             info,
             max_binding,
         })
@@ -241,13 +249,14 @@ impl Gpu {
         self.run(&self.render, &inputs, (tiles_x, rows.end - rows.start), out)
     }
 
-    /// Gradients of a loss with respect to each projected Gaussian of a `sum` scene,
-    /// given `dl_dimage` (`width·height·3`): per Gaussian `[d mean (2), d conic (3),
-    /// d opacity, d colour (3)]`, the quantities `fit::raster::backward` returns. Tile
-    /// lists are summed in tile order, as on the CPU.
-    pub fn backward_sum(
+    /// Gradients of a loss with respect to each projected Gaussian, given `dl_dimage`
+    /// (`width·height·3`): per Gaussian `[d mean (2), d conic (3), d opacity,
+    /// d colour (3)]`, the quantities `fit::raster::backward` returns. Each tile writes a
+    /// slot per list entry and the slots are summed in tile order, as on the CPU.
+    pub fn backward(
         &self,
         proj: &[Projected],
+        blend: Blend,
         width: u32,
         height: u32,
         dl_dimage: &[f32],
@@ -279,7 +288,11 @@ impl Gpu {
             self.storage(bytemuck::cast_slice(&indices)),
             self.storage(bytemuck::cast_slice(dl_dimage)),
         ];
-        self.run(&self.backward_sum, &inputs, (tiles_x, tiles_y), &mut slots)?;
+        let kernel = match blend {
+            Blend::Sum => &self.backward_sum,
+            Blend::Alpha => &self.backward_alpha,
+        };
+        self.run(kernel, &inputs, (tiles_x, tiles_y), &mut slots)?;
         let mut out = vec![[0.0f32; 9]; proj.len()];
         for (k, slot) in indices.iter().zip(slots.chunks_exact(9)) {
             for (o, s) in out[*k as usize].iter_mut().zip(slot) {
