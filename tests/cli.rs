@@ -370,7 +370,14 @@ fn encode_refuses_what_it_cannot_do() {
     let p = png.to_str().unwrap();
     let o = dir.join("a.gsi");
     let o = o.to_str().unwrap();
-    assert_refused(&gsi(&["encode", p, "-o", o, "--device", "gpu"]), "gpu");
+    // `--device gpu` with no adapter to be had (none matches this name) is refused.
+    let no_gpu = Command::new(env!("CARGO_BIN_EXE_gsi"))
+        .args(["encode", p, "-o", o, "--device", "gpu"])
+        .env("WGPU_ADAPTER_NAME", "no-such-adapter-anywhere")
+        .output()
+        .unwrap();
+    assert_refused(&no_gpu, "gpu");
+    assert!(!std::path::Path::new(o).exists());
     assert_refused(&gsi(&["encode", p, "-o", o, "--bpp", "0"]), "bpp 0");
     assert_refused(
         &gsi(&["encode", p, "-o", o, "--iterations", "0"]),

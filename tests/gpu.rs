@@ -215,3 +215,41 @@ fn gradients_match(blend: Blend, w: u32, h: u32) {
         );
     }
 }
+
+/// A fit whose steps run on the GPU decodes (on the CPU) at the quality of the same fit on
+/// the CPU: within 0.5 dB, both blend modes.
+#[cfg(feature = "encode")]
+#[test]
+fn a_gpu_fit_matches_a_cpu_fit() {
+    use gsi::fit::{encode, encode_on_gpu, Budget, EncodeOptions};
+    let Some(gpu) = gpu() else { return };
+    // A target with detail at several scales: the render of random Gaussians.
+    let source = random_scene(21, SceneSpec::new(96, 64, 600, Blend::Sum));
+    let mut target = gsi::render::render(&source, 96, 64).unwrap();
+    target.data.iter_mut().for_each(|v| *v = v.clamp(0.0, 1.0));
+    for blend in [Blend::Sum, Blend::Alpha] {
+        let opts = EncodeOptions {
+            budget: Budget::Gaussians(250),
+            iterations: 150,
+            blend,
+            ..EncodeOptions::default()
+        };
+        let cpu = encode(&target, &opts, &mut |_| {}).unwrap();
+        let on_gpu = encode_on_gpu(&target, &opts, &gpu, &mut |_| {}).unwrap();
+        eprintln!(
+            "{blend:?}: CPU fit {:.2} dB, GPU fit {:.2} dB",
+            cpu.psnr, on_gpu.psnr
+        );
+        assert!(
+            cpu.psnr > 20.0,
+            "{blend:?}: the CPU fit itself failed ({:.2} dB)",
+            cpu.psnr
+        );
+        assert!(
+            (cpu.psnr - on_gpu.psnr).abs() <= 0.5,
+            "{blend:?}: {:.2} vs {:.2} dB",
+            cpu.psnr,
+            on_gpu.psnr
+        );
+    }
+}

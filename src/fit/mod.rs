@@ -141,6 +141,9 @@ pub struct Fitter<'a> {
     adam: params::Adam,
     loss: loss::LossFn,
     seed: u64,
+    /// Where the forward and backward passes of [`Fitter::step`] run, when not the CPU.
+    #[cfg(feature = "gpu")]
+    gpu: Option<&'a crate::gpu::Gpu>,
 }
 
 impl<'a> Fitter<'a> {
@@ -161,6 +164,8 @@ impl<'a> Fitter<'a> {
             adam,
             loss: loss::LossFn::new(loss),
             seed,
+            #[cfg(feature = "gpu")]
+            gpu: None,
         };
         if init == Init::Adaptive {
             f.solve_colors(20);
@@ -223,14 +228,67 @@ impl<'a> Fitter<'a> {
         };
         let scene = self.scene_of(used);
         let projected = project_scene(&scene, w, h);
-        let fwd = raster::forward(&projected, self.blend, w, h);
-        let (value, dl) = self.loss.eval(&fwd.image, &self.target.data, w, h);
-        let psnr = measure.then(|| loss::psnr8(&fwd.image, &self.target.data, w, h));
-        let pg = raster::backward(&fwd, &projected, &dl, Need::All);
+        let (value, psnr, pg) = match self.passes_on_gpu(&projected, measure) {
+            Some(done) => done,
+            None => {
+                let fwd = raster::forward(&projected, self.blend, w, h);
+                let (value, dl) = self.loss.eval(&fwd.image, &self.target.data, w, h);
+                let psnr = measure.then(|| loss::psnr8(&fwd.image, &self.target.data, w, h));
+                let pg = raster::backward(&fwd, &projected, &dl, Need::All);
+                (value, psnr, pg)
+            }
+        };
         let mut grads = params::zero_grads(&self.params);
         params::chain(&scene.gaussians, &projected, &pg, w, h, &mut grads);
         self.adam.step(&mut self.params, &grads, lr);
         (value, psnr)
+    }
+
+    /// Run this fitter's forward and backward passes on `gpu` (the loss, the chain rule
+    /// and Adam stay on the CPU). If the GPU fails during a step, the fitter says so once
+    /// and continues on the CPU.
+    #[cfg(feature = "gpu")]
+    pub fn use_gpu(&mut self, gpu: &'a crate::gpu::Gpu) {
+        self.gpu = Some(gpu);
+    }
+
+    /// The step's render, loss and gradients computed on the GPU, or `None` to do them
+    /// on the CPU.
+    #[allow(clippy::type_complexity)]
+    fn passes_on_gpu(
+        &mut self,
+        projected: &[crate::render::Projected],
+        measure: bool,
+    ) -> Option<(f32, Option<f64>, Vec<raster::ProjGrad>)> {
+        #[cfg(feature = "gpu")]
+        if let Some(gpu) = self.gpu {
+            let (w, h) = (self.target.width, self.target.height);
+            let mut run = || -> Result<_, Error> {
+                let image = gpu.render_projected(projected, self.blend, w, h)?;
+                let (value, dl) = self.loss.eval(&image.data, &self.target.data, w, h);
+                let psnr = measure.then(|| loss::psnr8(&image.data, &self.target.data, w, h));
+                let g = gpu.backward(projected, self.blend, w, h, &dl)?;
+                let pg = g
+                    .iter()
+                    .map(|g| raster::ProjGrad {
+                        mean: [g[0], g[1]],
+                        conic: [g[2], g[3], g[4]],
+                        opacity: g[5],
+                        color: [g[6], g[7], g[8]],
+                    })
+                    .collect();
+                Ok((value, psnr, pg))
+            };
+            match run() {
+                Ok(done) => return Some(done),
+                Err(e) => {
+                    eprintln!("gsi: the GPU failed ({e}); fitting continues on the CPU");
+                    self.gpu = None;
+                }
+            }
+        }
+        let _ = (projected, measure);
+        None
     }
 
     /// Total colour each Gaussian puts into the image, `Σ_p alpha_i T_i · max|c_i|`
@@ -322,6 +380,28 @@ pub fn encode(
     opts: &EncodeOptions,
     on_progress: &mut dyn FnMut(&Progress),
 ) -> Result<Encoded, Error> {
+    encode_inner(target, opts, &mut |_| {}, on_progress)
+}
+
+/// [`encode`] with each optimizer step's forward and backward passes on `gpu`
+/// ([`Fitter::use_gpu`]); initialization, colour solves, pruning and the final
+/// measurement stay on the CPU.
+#[cfg(feature = "gpu")]
+pub fn encode_on_gpu(
+    target: &Target,
+    opts: &EncodeOptions,
+    gpu: &crate::gpu::Gpu,
+    on_progress: &mut dyn FnMut(&Progress),
+) -> Result<Encoded, Error> {
+    encode_inner(target, opts, &mut |f| f.use_gpu(gpu), on_progress)
+}
+
+fn encode_inner<'a>(
+    target: &'a Target,
+    opts: &EncodeOptions,
+    setup: &mut dyn FnMut(&mut Fitter<'a>),
+    on_progress: &mut dyn FnMut(&Progress),
+) -> Result<Encoded, Error> {
     check_target(target)?;
     let (w, h) = (target.width, target.height);
     let px = (w as f32) * (h as f32);
@@ -335,6 +415,7 @@ pub fn encode(
     };
     let start = std::time::Instant::now();
     let mut fitter = Fitter::new(target, n, opts.init, opts.blend, opts.loss, opts.seed);
+    setup(&mut fitter);
     let mut curve = Vec::new();
     let mut report =
         |it: u32, total: u32, n: usize, loss: f32, psnr: f64, curve: &mut Vec<Progress>| {

@@ -140,7 +140,24 @@ impl Gpu {
                 "inconsistent Gaussian set",
             ));
         }
-        let proj = project_scene(scene, width, height);
+        self.render_projected(
+            &project_scene(scene, width, height),
+            scene.blend,
+            width,
+            height,
+        )
+    }
+
+    /// [`Gpu::render`] of Gaussians already projected for this size (the fitter projects
+    /// once per step for both passes).
+    pub fn render_projected(
+        &self,
+        proj: &[Projected],
+        blend: Blend,
+        width: u32,
+        height: u32,
+    ) -> Result<RgbImage> {
+        Limits::default().check_output(width, height)?;
         let mut data = vec![0.0f32; width as usize * height as usize * 3];
         if proj.is_empty() {
             return Ok(RgbImage {
@@ -153,7 +170,7 @@ impl Gpu {
         let tiles_y = height.div_ceil(TILE);
         // Entries per tile row, to cut bands that fit the adapter's limits.
         let mut per_row = vec![0u64; tiles_y as usize];
-        for g in &proj {
+        for g in proj {
             let span = u64::from(g.bbox.x1 / TILE - g.bbox.x0 / TILE + 1);
             for ty in g.bbox.y0 / TILE..=g.bbox.y1 / TILE {
                 per_row[ty as usize] += span;
@@ -164,7 +181,7 @@ impl Gpu {
         if gaussian_bytes > self.max_binding || row_bytes > self.max_binding {
             return Err(too_big(&self.info, "one tile row"));
         }
-        let (gaussians, boxes) = upload_layout(&proj);
+        let (gaussians, boxes) = upload_layout(proj);
         let g_buf = self.storage(bytemuck::cast_slice(&gaussians));
         let b_buf = self.storage(bytemuck::cast_slice(&boxes));
         let mut ty = 0u32;
@@ -185,9 +202,9 @@ impl Gpu {
             let band =
                 &mut data[(ty * TILE) as usize * width as usize * 3..][..rows * width as usize * 3];
             self.render_band(
-                &proj,
+                proj,
                 (&g_buf, &b_buf),
-                scene.blend,
+                blend,
                 (width, height, tiles_x),
                 ty..end,
                 band,

@@ -1,6 +1,6 @@
 //! `gsi decode`: render a file to an image at any size.
 
-use crate::encode::DeviceArg;
+use crate::device::{self, DeviceArg};
 use crate::{io, read_gsi, Failure};
 use gsi::format::Limits;
 use std::path::{Path, PathBuf};
@@ -58,43 +58,24 @@ pub fn run(args: Args) -> Result<(), Failure> {
     // Refuse an unsupported output format before any rendering (or GPU start-up).
     encode_image(&[0; 3], 1, 1, &args.output)?;
     let scene = f.records.to_scene();
-    if args.device != DeviceArg::Cpu {
-        quiet_wayland_probe();
-    }
-    let image = match args.device {
-        DeviceArg::Cpu => gsi::render::render(&scene, w, ht)?,
-        DeviceArg::Gpu => gsi::gpu::Gpu::new()
-            .map_err(|e| Failure(format!("--device gpu: {e}")))?
-            .render(&scene, w, ht)?,
-        DeviceArg::Auto => match gsi::gpu::Gpu::new_hardware() {
-            Ok(gpu) => match gpu.render(&scene, w, ht) {
-                Ok(image) => image,
-                Err(e) if e.kind() == gsi::format::ErrorKind::LimitExceeded => {
-                    eprintln!("gsi: {e}; decoding on the CPU");
-                    gsi::render::render(&scene, w, ht)?
-                }
-                Err(e) => return Err(e.into()),
-            },
-            Err(e) => {
-                eprintln!("gsi: no GPU ({e}); decoding on the CPU");
+    let image = match device::open(args.device, "decoding", false)? {
+        None => gsi::render::render(&scene, w, ht)?,
+        Some(gpu) => match gpu.render(&scene, w, ht) {
+            Ok(image) => image,
+            // Too large for this adapter's buffers: `auto` falls back, `gpu` fails.
+            Err(e)
+                if e.kind() == gsi::format::ErrorKind::LimitExceeded
+                    && args.device == DeviceArg::Auto =>
+            {
+                eprintln!("gsi: {e}; decoding on the CPU");
                 gsi::render::render(&scene, w, ht)?
             }
+            Err(e) => return Err(e.into()),
         },
     };
     let bytes = encode_image(&image.to_rgb8(), w, ht, &args.output)?;
     io::write_output(&args.output, &bytes)
         .map_err(|e| Failure(format!("{}: {e}", args.output.display())))
-}
-
-/// Mesa's Vulkan drivers probe for a Wayland compositor while wgpu enumerates adapters,
-/// and libwayland prints `error: XDG_RUNTIME_DIR is invalid or not set` when that variable
-/// is unset (servers, CI, containers): a scary line about nothing. Point it at the temp
-/// folder, where no compositor socket exists, so the probe fails quietly. Called before
-/// any thread is started.
-fn quiet_wayland_probe() {
-    if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
-        std::env::set_var("XDG_RUNTIME_DIR", std::env::temp_dir());
-    }
 }
 
 /// PNG unless the output path ends in .jpg/.jpeg.

@@ -1,5 +1,6 @@
 //! `gsi encode`: fit Gaussians to an image and write a .gsi file.
 
+use crate::device::{self, DeviceArg};
 use crate::{io, Failure};
 use gsi::fit::{self, Budget, EncodeOptions, Init, Loss, Target};
 use gsi::model::Blend;
@@ -35,7 +36,9 @@ pub struct Args {
     /// Eq. 9 with λ = 0.2.
     #[arg(long, value_enum, default_value_t = LossArg::L2)]
     loss: LossArg,
-    /// Where to fit: `auto` uses the CPU (the GPU path is not built yet).
+    /// Where each optimizer step's render and gradients run: `auto` uses a hardware GPU
+    /// when there is one, `gpu` any adapter (software ones included), `cpu` the CPU.
+    /// Initialization, colour solves and pruning run on the CPU either way.
     #[arg(long, value_enum, default_value_t = DeviceArg::Auto)]
     device: DeviceArg,
     /// Seed of every random choice; the same seed and thread count give the same file.
@@ -62,13 +65,6 @@ enum LossArg {
 enum BlendArg {
     Sum,
     Alpha,
-}
-
-#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum DeviceArg {
-    Auto,
-    Cpu,
-    Gpu,
 }
 
 /// Load an image as RGB in `[0, 1]`, converting grey, alpha and 16-bit explicitly:
@@ -109,11 +105,6 @@ pub fn load_image(path: &Path) -> Result<Target, Failure> {
 }
 
 pub fn run(args: Args) -> Result<(), Failure> {
-    if args.device == DeviceArg::Gpu {
-        return Err(Failure(
-            "--device gpu: the GPU fitting path is not built yet; use --device cpu".into(),
-        ));
-    }
     let target = load_image(&args.input)?;
     let budget = match (args.gaussians, args.bpp, args.target_psnr) {
         (Some(n), _, _) => Budget::Gaussians(n),
@@ -154,11 +145,15 @@ pub fn run(args: Args) -> Result<(), Failure> {
     } else {
         bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
     }
-    let encoded = fit::encode(&target, &opts, &mut |p| {
+    let mut progress = |p: &fit::Progress| {
         bar.set_length(u64::from(p.total));
         bar.set_position(u64::from(p.iteration));
         bar.set_message(format!("N {}  PSNR {:.2} dB", p.gaussians, p.psnr));
-    })?;
+    };
+    let encoded = match device::open(args.device, "fitting", args.quiet)? {
+        Some(gpu) => fit::encode_on_gpu(&target, &opts, &gpu, &mut progress)?,
+        None => fit::encode(&target, &opts, &mut progress)?,
+    };
     bar.finish_and_clear();
     io::write_output(&args.output, &encoded.bytes)
         .map_err(|e| Failure(format!("{}: {e}", args.output.display())))?;

@@ -1,6 +1,6 @@
 //! `gsi enhance`: zero-shot low-light enhancement of a .gsi file's colours, in the file.
 
-use crate::encode::DeviceArg;
+use crate::device::DeviceArg;
 use crate::{io, Failure};
 use gsi::enhance::fit::{scene_luma, EnhanceOptions};
 use gsi::enhance::{self, LOW_LIGHT_LUMA};

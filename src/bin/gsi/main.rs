@@ -3,6 +3,7 @@
 
 mod compare;
 mod decode;
+mod device;
 mod encode;
 mod enhance;
 mod info;
