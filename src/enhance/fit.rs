@@ -535,10 +535,11 @@ fn mix_backward(
     g_map: &mut [f32],
     g_params: &mut [f32],
 ) {
+    let (map_len, params_len) = (g_map.len(), g_params.len());
     let job = |(t, (c, g)): (&[MapTap], (Colors, Colors))| {
         let mut s = MixScratch::new(enh);
-        let mut gm = vec![0.0f32; g_map.len()];
-        let mut gp = vec![0.0f32; g_params.len()];
+        let mut gm = vec![0.0f32; map_len];
+        let mut gp = vec![0.0f32; params_len];
         for (t, (c, g)) in t.iter().zip(c.iter().zip(g)) {
             s.backward(enh, t, *c, *g, &mut gm, &mut gp);
         }
