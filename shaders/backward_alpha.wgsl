@@ -7,10 +7,6 @@
 // workgroup adds them with a fixed tree reduction and writes one slot per list entry, so
 // no atomics are needed and the result does not depend on scheduling.
 
-const TILE: u32 = 16u;
-const ALPHA_MIN: f32 = 0.003921569; // 1/255, as render::ALPHA_MIN
-const ALPHA_MAX: f32 = 0.99;
-const TRANSMITTANCE_MIN: f32 = 0.0001;
 const SLOT: u32 = 9u;
 const PIXELS: u32 = 256u;
 

@@ -5,8 +5,6 @@
 // host sums a Gaussian's slots in a fixed order (as `fit::raster::backward` does on the
 // CPU, whose arithmetic this follows term by term).
 
-const TILE: u32 = 16u;
-const ALPHA_MIN: f32 = 0.003921569; // 1/255, as render::ALPHA_MIN
 const SLOT: u32 = 9u;
 
 struct Params {

@@ -7,11 +7,6 @@
 // than bit for bit. Projection (covariance clamps, conic, pixel box) and binning are done
 // once on the CPU by `render::project`, so every renderer shares them.
 
-const TILE: u32 = 16u;
-const ALPHA_MIN: f32 = 0.003921569; // 1/255, as render::ALPHA_MIN
-const ALPHA_MAX: f32 = 0.99;
-const TRANSMITTANCE_MIN: f32 = 0.0001;
-
 struct Params {
     width: u32,
     height: u32,

@@ -284,9 +284,9 @@ impl<'a> Session<'a> {
         }
     }
 
-    /// The total loss at the current parameters, with its gradient left in `self.grad`.
-    fn loss_and_grad(&mut self) -> (ImageTerms, MapTerms) {
-        let (lay, c0) = (&self.lay, &self.scene.gaussians.colors);
+    /// Bring `self.enh` up to date with `theta`: the head's weight map and the operators.
+    fn refresh_enhancer(&mut self) {
+        let lay = &self.lay;
         head_forward(
             lay,
             &self.theta,
@@ -298,6 +298,12 @@ impl<'a> Session<'a> {
         self.enh
             .params
             .extend_from_slice(&self.theta[lay.head_len()..]);
+    }
+
+    /// The total loss at the current parameters, with its gradient left in `self.grad`.
+    fn loss_and_grad(&mut self) -> (ImageTerms, MapTerms) {
+        self.refresh_enhancer();
+        let (lay, c0) = (&self.lay, &self.scene.gaussians.colors);
         mix_forward(&self.enh, &self.taps, c0, &mut self.colors);
         self.a.render(&self.colors, &mut self.img);
         let terms = clamped_loss(&self.loss, &mut self.img, &mut self.g_img);
@@ -352,23 +358,10 @@ impl<'a> Session<'a> {
 
     /// Quantize the enhancer as it will be stored and apply that one to every colour.
     pub fn finish(mut self) -> Fitted {
-        let lay = &self.lay;
-        head_forward(
-            lay,
-            &self.theta,
-            &self.feats,
-            &mut self.head_act,
-            &mut self.enh.map,
-        );
-        self.enh.params.clear();
-        self.enh
-            .params
-            .extend_from_slice(&self.theta[lay.head_len()..]);
+        self.refresh_enhancer();
         let (o, w) = (&self.opts, &self.opts.weights);
         let fit = FitSettings {
-            weights: [
-                w.exposure, w.hue, w.spatial, w.colour, w.contrast, w.tv, w.entropy,
-            ],
+            weights: w.to_array(),
             exposure: o.params.exposure_target,
             saturation_tau: o.params.saturation_tau,
             contrast_gamma: o.params.contrast_gamma,
@@ -721,15 +714,7 @@ mod tests {
         let only = |k: usize| {
             let mut w = [0.0f32; 7];
             w[k] = 1.0;
-            LossWeights {
-                exposure: w[0],
-                hue: w[1],
-                spatial: w[2],
-                colour: w[3],
-                contrast: w[4],
-                tv: w[5],
-                entropy: w[6],
-            }
+            LossWeights::from_array(w)
         };
         let cases = (0..7).map(|k| (Blend::Sum, only(k))).chain([
             (Blend::Sum, LossWeights::default()),

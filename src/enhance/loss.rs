@@ -93,6 +93,35 @@ pub struct LossWeights {
     pub entropy: f32,
 }
 
+impl LossWeights {
+    /// λ1..λ7 in the paper's order (exposure, hue, spatial, colour, contrast, TV,
+    /// entropy): the order of the command line's `--weights` and of `gENH`.
+    pub fn from_array(w: [f32; 7]) -> LossWeights {
+        LossWeights {
+            exposure: w[0],
+            hue: w[1],
+            spatial: w[2],
+            colour: w[3],
+            contrast: w[4],
+            tv: w[5],
+            entropy: w[6],
+        }
+    }
+
+    /// The inverse of [`LossWeights::from_array`].
+    pub fn to_array(&self) -> [f32; 7] {
+        [
+            self.exposure,
+            self.hue,
+            self.spatial,
+            self.colour,
+            self.contrast,
+            self.tv,
+            self.entropy,
+        ]
+    }
+}
+
 impl Default for LossWeights {
     fn default() -> Self {
         LossWeights {

@@ -15,6 +15,16 @@ use crate::model::{Blend, Scene};
 use crate::render::{project_scene, Projected, RgbImage, TILE};
 use wgpu::util::DeviceExt;
 
+/// A shader's source: the shared contract constants, then the shader itself.
+macro_rules! shader {
+    ($name:literal) => {
+        concat!(
+            include_str!("../../shaders/contract.wgsl"),
+            include_str!(concat!("../../shaders/", $name, ".wgsl"))
+        )
+    };
+}
+
 /// Why no GPU can be used.
 #[derive(Debug)]
 pub struct GpuError(String);
@@ -83,24 +93,9 @@ impl Gpu {
         .map_err(|e| GpuError(format!("{}: {e}", info.name)))?;
         // Binding 0 is the uniform block; the others are storage buffers, read-only
         // except the last (the output).
-        let render = Kernel::new(
-            &device,
-            "render",
-            include_str!("../../shaders/render.wgsl"),
-            6,
-        );
-        let backward_sum = Kernel::new(
-            &device,
-            "backward_sum",
-            include_str!("../../shaders/backward_sum.wgsl"),
-            7,
-        );
-        let backward_alpha = Kernel::new(
-            &device,
-            "backward_alpha",
-            include_str!("../../shaders/backward_alpha.wgsl"),
-            7,
-        );
+        let render = Kernel::new(&device, "render", shader!("render"), 6);
+        let backward_sum = Kernel::new(&device, "backward_sum", shader!("backward_sum"), 7);
+        let backward_alpha = Kernel::new(&device, "backward_alpha", shader!("backward_alpha"), 7);
         let max_binding = limits
             .max_storage_buffer_binding_size
             .min(limits.max_buffer_size);

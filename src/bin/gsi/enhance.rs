@@ -126,15 +126,9 @@ pub fn run(args: Args) -> Result<(), Failure> {
         let weights = match &args.weights {
             None => EnhanceOptions::default().weights,
             Some(w) if w.len() == 7 && w.iter().all(|x| x.is_finite() && *x >= 0.0) => {
-                gsi::enhance::loss::LossWeights {
-                    exposure: w[0],
-                    hue: w[1],
-                    spatial: w[2],
-                    colour: w[3],
-                    contrast: w[4],
-                    tv: w[5],
-                    entropy: w[6],
-                }
+                let mut a = [0.0; 7];
+                a.copy_from_slice(w);
+                gsi::enhance::loss::LossWeights::from_array(a)
             }
             Some(w) => {
                 return Err(Failure(format!(
