@@ -6,24 +6,11 @@
 // on the CPU. A Gaussian's gradient is the sum of its pixels' contributions: the
 // workgroup adds them with a fixed tree reduction and writes one slot per list entry, so
 // no atomics are needed and the result does not depend on scheduling.
+//
+// Bindings, `Params` and `SLOT` are in `backward_bindings.wgsl`, the contract constants in
+// `contract.wgsl`: the host prepends both.
 
-const SLOT: u32 = 9u;
 const PIXELS: u32 = 256u;
-
-struct Params {
-    width: u32,
-    height: u32,
-    tiles_x: u32,
-    _pad: u32,
-}
-
-@group(0) @binding(0) var<uniform> params: Params;
-@group(0) @binding(1) var<storage, read> gaussians: array<vec4<f32>>;
-@group(0) @binding(2) var<storage, read> boxes: array<vec4<u32>>;
-@group(0) @binding(3) var<storage, read> offsets: array<u32>;
-@group(0) @binding(4) var<storage, read> indices: array<u32>;
-@group(0) @binding(5) var<storage, read> dl_dimage: array<f32>;
-@group(0) @binding(6) var<storage, read_write> slots: array<f32>;
 
 var<workgroup> partial: array<f32, 2304>; // PIXELS * SLOT
 

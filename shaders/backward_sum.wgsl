@@ -4,25 +4,9 @@
 // tile's list entries, and each writes its own slot, so no atomics are needed and the
 // host sums a Gaussian's slots in a fixed order (as `fit::raster::backward` does on the
 // CPU, whose arithmetic this follows term by term).
-
-const SLOT: u32 = 9u;
-
-struct Params {
-    width: u32,
-    height: u32,
-    tiles_x: u32,
-    _pad: u32,
-}
-
-@group(0) @binding(0) var<uniform> params: Params;
-@group(0) @binding(1) var<storage, read> gaussians: array<vec4<f32>>;
-@group(0) @binding(2) var<storage, read> boxes: array<vec4<u32>>;
-@group(0) @binding(3) var<storage, read> offsets: array<u32>;
-@group(0) @binding(4) var<storage, read> indices: array<u32>;
-// d loss / d pixel, RGB per pixel of the whole image.
-@group(0) @binding(5) var<storage, read> dl_dimage: array<f32>;
-// Per list entry: d mean (2), d conic (3), d opacity, d colour (3).
-@group(0) @binding(6) var<storage, read_write> slots: array<f32>;
+//
+// Bindings, `Params` and `SLOT` are in `backward_bindings.wgsl`, the contract constants in
+// `contract.wgsl`: the host prepends both.
 
 @compute @workgroup_size(64, 1, 1)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {

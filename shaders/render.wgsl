@@ -6,6 +6,8 @@
 // `exp` may round differently on a GPU, which is why GPU and CPU agree to 1/255 rather
 // than bit for bit. Projection (covariance clamps, conic, pixel box) and binning are done
 // once on the CPU by `render::project`, so every renderer shares them.
+//
+// The contract constants (TILE, ALPHA_MIN, …) are in `contract.wgsl`, prepended by the host.
 
 struct Params {
     width: u32,

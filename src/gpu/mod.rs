@@ -17,10 +17,10 @@ use wgpu::util::DeviceExt;
 
 /// A shader's source: the shared contract constants, then the shader itself.
 macro_rules! shader {
-    ($name:literal) => {
+    ($($name:literal),+) => {
         concat!(
             include_str!("../../shaders/contract.wgsl"),
-            include_str!(concat!("../../shaders/", $name, ".wgsl"))
+            $(include_str!(concat!("../../shaders/", $name, ".wgsl"))),+
         )
     };
 }
@@ -94,8 +94,18 @@ impl Gpu {
         // Binding 0 is the uniform block; the others are storage buffers, read-only
         // except the last (the output).
         let render = Kernel::new(&device, "render", shader!("render"), 6);
-        let backward_sum = Kernel::new(&device, "backward_sum", shader!("backward_sum"), 7);
-        let backward_alpha = Kernel::new(&device, "backward_alpha", shader!("backward_alpha"), 7);
+        let backward_sum = Kernel::new(
+            &device,
+            "backward_sum",
+            shader!("backward_bindings", "backward_sum"),
+            7,
+        );
+        let backward_alpha = Kernel::new(
+            &device,
+            "backward_alpha",
+            shader!("backward_bindings", "backward_alpha"),
+            7,
+        );
         let max_binding = limits
             .max_storage_buffer_binding_size
             .min(limits.max_buffer_size);
