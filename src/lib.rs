@@ -4,7 +4,7 @@
 //! opacity) in checksummed, quantized, compressed chunks (`format-spec.md`). Decoding is
 //! rendering: the Gaussians are evaluated at the pixel centres of an output of any size.
 //!
-//! Four representations, each with one home: bytes ([`format`]), records (quantized
+//! Four representations, each with one home: bytes ([`format`](mod@format)), records (quantized
 //! attributes, [`format::Records`]), the float model ([`model`]) and pixels ([`render`]).
 //!
 //! # Embedding the decoder

@@ -1,9 +1,13 @@
-//! Rendering on a GPU with wgpu compute shaders (`shaders/render.wgsl`).
+//! Rendering and its backward pass on a GPU, with wgpu compute shaders (`shaders/`).
 //!
 //! The GPU renders the same pixels as [`crate::render`]: projection and tile binning are
 //! the CPU's own ([`project_scene`]), and the shader evaluates spec §6 per pixel in the
 //! same `f32` order, so the only difference is the rounding of `exp` (within 1/255 after
-//! 8-bit conversion; `tests/gpu.rs` holds it to that).
+//! 8-bit conversion; `tests/gpu.rs` holds it to that). [`Gpu::backward`] gives the
+//! gradients `fit::raster::backward` gives, for both blend modes, with no atomics: each
+//! tile writes one slot per list entry and the host sums them in a fixed order. The
+//! fitter uses both for its steps ([`crate::fit::Fitter::use_gpu`]); projection, the loss,
+//! the chain rule and Adam still run on the CPU.
 //!
 //! The adapter is headless (no surface) and honours wgpu's environment variables:
 //! `WGPU_BACKEND` (e.g. `vulkan`), `WGPU_ADAPTER_NAME` (a substring of the adapter's
