@@ -57,6 +57,9 @@ pub struct Args {
     /// No progress bar and no summary line.
     #[arg(long)]
     quiet: bool,
+    /// Print the loss terms (unweighted) every 50 iterations, to tune `--weights`.
+    #[arg(long, conflicts_with = "quiet")]
+    verbose: bool,
 }
 
 fn read_all(path: &Path) -> Result<Vec<u8>, Failure> {
@@ -181,8 +184,14 @@ pub fn run(args: Args) -> Result<(), Failure> {
         let start = std::time::Instant::now();
         let (out, fitted) = enhance::enhance(&file, &opts, keep, &limits, &mut |p| {
             bar.set_position(u64::from(p.iteration));
-            if std::env::var_os("GSI_TRACE").is_some() && p.iteration % 50 == 0 {
-                eprintln!("{} {:?} {:?}", p.iteration, p.terms, p.map);
+            if args.verbose && (p.iteration % 50 == 0 || p.iteration == p.iterations) {
+                let (t, m) = (&p.terms, &p.map);
+                bar.suspend(|| {
+                    eprintln!(
+                        "it {:>5}  total {:.4}  exposure {:.4}  hue {:.4}  spatial {:.4}  colour {:.4}  contrast {:.4}  tv {:.2e}  entropy {:.3}",
+                        p.iteration, t.total, t.exposure, t.hue, t.spatial, t.colour, t.contrast, m.tv, m.entropy
+                    )
+                });
             }
             if p.iteration % 10 == 0 {
                 bar.set_message(format!("loss {:.3}", p.terms.total));
