@@ -50,14 +50,7 @@ impl Backbone for FeatureBank {
     fn extract(&self, img: &[f32], width: usize, height: usize, mw: usize, mh: usize) -> Vec<f32> {
         assert_eq!(img.len(), width * height * 3);
         let cells = mw * mh;
-        let luma: Vec<f32> = img
-            .chunks_exact(3)
-            .map(|p| {
-                0.299 * p[0].clamp(0.0, 1.0)
-                    + 0.587 * p[1].clamp(0.0, 1.0)
-                    + 0.114 * p[2].clamp(0.0, 1.0)
-            })
-            .collect();
+        let luma: Vec<f32> = img.chunks_exact(3).map(super::loss::display_luma).collect();
         // Each cell averages the pixels of its share of the image; a cell smaller than
         // a pixel (a map finer than the image) takes the pixel under its centre.
         let span = |c: usize, n: usize, px: usize| {

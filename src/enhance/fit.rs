@@ -97,13 +97,7 @@ pub fn mean_luma(img: &[f32]) -> f32 {
     let n = (img.len() / 3).max(1) as f64;
     let s: f64 = img
         .chunks_exact(3)
-        .map(|p| {
-            f64::from(
-                0.299 * p[0].clamp(0.0, 1.0)
-                    + 0.587 * p[1].clamp(0.0, 1.0)
-                    + 0.114 * p[2].clamp(0.0, 1.0),
-            )
-        })
+        .map(|p| f64::from(super::loss::display_luma(p)))
         .sum();
     (s / n) as f32
 }
@@ -306,7 +300,7 @@ impl<'a> Session<'a> {
         let (lay, c0) = (&self.lay, &self.scene.gaussians.colors);
         mix_forward(&self.enh, &self.taps, c0, &mut self.colors);
         self.a.render(&self.colors, &mut self.img);
-        let terms = clamped_loss(&self.loss, &mut self.img, &mut self.g_img);
+        let terms = self.loss.eval_display(&mut self.img, &mut self.g_img);
         self.a.transpose(&self.g_img, &mut self.g_col);
         self.grad.fill(0.0);
         self.g_map.fill(0.0);
@@ -373,7 +367,7 @@ impl<'a> Session<'a> {
         let g = &self.scene.gaussians;
         let colors = enhancer.apply(&g.positions, &g.colors);
         self.a.render(&colors, &mut self.img);
-        let terms = clamped_loss(&self.loss, &mut self.img, &mut self.g_img);
+        let terms = self.loss.eval_display(&mut self.img, &mut self.g_img);
         Fitted {
             record,
             enhancer,
@@ -382,11 +376,6 @@ impl<'a> Session<'a> {
             mean_luma: (mean_luma(&self.low), mean_luma(&self.img)),
         }
     }
-}
-
-/// The loss of the image as the 8-bit decoder will show it ([`ImageLoss::eval_display`]).
-fn clamped_loss(loss: &ImageLoss, img: &mut [f32], g: &mut [f32]) -> ImageTerms {
-    loss.eval_display(img, g)
 }
 
 /// Initial parameters: He-style uniform for the hidden layers, small positive hidden

@@ -24,21 +24,20 @@ pub mod operator;
 pub use mixture::Enhancer;
 
 use crate::format::{Attribute, ChunkedFile, Limits, Records, Result};
-use crate::model::Scene;
 
 /// Images whose mean luma (Rec. 601, `[0, 1]`) is above this are not low-light, and
 /// are left alone unless the caller insists. LOL's low-light inputs average 0.05–0.15;
 /// Kodak's photographs 0.3–0.6.
 pub const LOW_LIGHT_LUMA: f32 = 0.25;
 
-/// The scene a file shows before any enhancement: its geometry with the colours in
-/// `gORC` when it has them, else those in `GCOL`.
-pub fn base_scene(file: &ChunkedFile, limits: &Limits) -> Result<Scene> {
-    let records = Records {
+/// The records a file holds before any enhancement: its geometry with the colours in
+/// `gORC` when it has them, else those in `GCOL`. Stage 2 reads the scene to enhance
+/// from them, and the bit depths to store the new colours with.
+pub fn base_records(file: &ChunkedFile, limits: &Limits) -> Result<Records> {
+    Ok(Records {
         colors: file.base_colors(limits)?,
         ..file.file.records.clone()
-    };
-    Ok(records.to_scene())
+    })
 }
 
 /// Quantize enhanced colours with the bit depths the file's colours had (8 where a
@@ -67,9 +66,10 @@ pub fn apply_from(
         )
     })?;
     let enhancer = Enhancer::from_record(&record);
-    let scene = base_scene(target, limits)?;
+    let base = base_records(target, limits)?;
+    let scene = base.to_scene();
     let colors = enhancer.apply(&scene.gaussians.positions, &scene.gaussians.colors);
-    let attr = colors_like(&colors, &target.base_colors(limits)?);
+    let attr = colors_like(&colors, &base.colors);
     target.with_colors(
         &attr,
         &record,
@@ -89,9 +89,9 @@ pub fn enhance(
     limits: &Limits,
     progress: &mut dyn FnMut(&fit::Progress),
 ) -> Result<(Vec<u8>, fit::Fitted)> {
-    let scene = base_scene(file, limits)?;
-    let fitted = fit::fit(&scene, opts, &features::FeatureBank, progress);
-    let attr = colors_like(&fitted.colors, &file.base_colors(limits)?);
+    let base = base_records(file, limits)?;
+    let fitted = fit::fit(&base.to_scene(), opts, &features::FeatureBank, progress);
+    let attr = colors_like(&fitted.colors, &base.colors);
     let bytes = file.with_colors(
         &attr,
         &fitted.record,

@@ -27,7 +27,7 @@ pub use params::LearningRates;
 
 use crate::format::{self, BitDepths, Error, ErrorKind, Records, WriteOptions};
 use crate::model::{Blend, CovParam, GaussianSet, Scene};
-use crate::render::{project_scene, RgbImage};
+use crate::render::{project_scene, Projected, RgbImage};
 use raster::Need;
 
 /// The image being fitted: interleaved RGB in `[0, 1]` (sRGB-encoded values).
@@ -228,16 +228,7 @@ impl<'a> Fitter<'a> {
         };
         let scene = self.scene_of(used);
         let projected = project_scene(&scene, w, h);
-        let (value, psnr, pg) = match self.passes_on_gpu(&projected, measure) {
-            Some(done) => done,
-            None => {
-                let fwd = raster::forward(&projected, self.blend, w, h);
-                let (value, dl) = self.loss.eval(&fwd.image, &self.target.data, w, h);
-                let psnr = measure.then(|| loss::psnr8(&fwd.image, &self.target.data, w, h));
-                let pg = raster::backward(&fwd, &projected, &dl, Need::All);
-                (value, psnr, pg)
-            }
-        };
+        let (value, psnr, pg) = self.passes(&projected, measure);
         let mut grads = params::zero_grads(&self.params);
         params::chain(&scene.gaussians, &projected, &pg, w, h, &mut grads);
         self.adam.step(&mut self.params, &grads, lr);
@@ -252,43 +243,49 @@ impl<'a> Fitter<'a> {
         self.gpu = Some(gpu);
     }
 
-    /// The step's render, loss and gradients computed on the GPU, or `None` to do them
-    /// on the CPU.
-    #[allow(clippy::type_complexity)]
-    fn passes_on_gpu(
+    /// The step's render, loss (with the PSNR when `measure`) and gradients: on the GPU
+    /// when the fitter has one, else, or once the GPU has failed, on the CPU.
+    fn passes(
         &mut self,
-        projected: &[crate::render::Projected],
+        projected: &[Projected],
         measure: bool,
-    ) -> Option<(f32, Option<f64>, Vec<raster::ProjGrad>)> {
+    ) -> (f32, Option<f64>, Vec<raster::ProjGrad>) {
+        let (w, h) = (self.target.width, self.target.height);
         #[cfg(feature = "gpu")]
         if let Some(gpu) = self.gpu {
-            let (w, h) = (self.target.width, self.target.height);
-            let mut run = || -> Result<_, Error> {
+            let mut on_gpu = || -> Result<_, Error> {
                 let image = gpu.render_projected(projected, self.blend, w, h)?;
-                let (value, dl) = self.loss.eval(&image.data, &self.target.data, w, h);
-                let psnr = measure.then(|| loss::psnr8(&image.data, &self.target.data, w, h));
-                let g = gpu.backward(projected, self.blend, w, h, &dl)?;
-                let pg = g
-                    .iter()
-                    .map(|g| raster::ProjGrad {
-                        mean: [g[0], g[1]],
-                        conic: [g[2], g[3], g[4]],
-                        opacity: g[5],
-                        color: [g[6], g[7], g[8]],
-                    })
-                    .collect();
-                Ok((value, psnr, pg))
+                let (value, dl, psnr) = self.score(&image.data, measure);
+                let pg = gpu.backward(projected, self.blend, w, h, &dl)?;
+                Ok((
+                    value,
+                    psnr,
+                    pg.iter().map(raster::ProjGrad::from_slot).collect(),
+                ))
             };
-            match run() {
-                Ok(done) => return Some(done),
+            match on_gpu() {
+                Ok(done) => return done,
                 Err(e) => {
                     eprintln!("gsi: the GPU failed ({e}); fitting continues on the CPU");
                     self.gpu = None;
                 }
             }
         }
-        let _ = (projected, measure);
-        None
+        let fwd = raster::forward(projected, self.blend, w, h);
+        let (value, dl, psnr) = self.score(&fwd.image, measure);
+        (
+            value,
+            psnr,
+            raster::backward(&fwd, projected, &dl, Need::All),
+        )
+    }
+
+    /// The loss of `image` and its gradient, and its PSNR when `measure`.
+    fn score(&mut self, image: &[f32], measure: bool) -> (f32, Vec<f32>, Option<f64>) {
+        let (w, h) = (self.target.width, self.target.height);
+        let (value, dl) = self.loss.eval(image, &self.target.data, w, h);
+        let psnr = measure.then(|| loss::psnr8(image, &self.target.data, w, h));
+        (value, dl, psnr)
     }
 
     /// Total colour each Gaussian puts into the image, `Σ_p alpha_i T_i · max|c_i|`

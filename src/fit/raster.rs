@@ -29,6 +29,17 @@ pub struct ProjGrad {
 }
 
 impl ProjGrad {
+    /// From the flat layout of a GPU gradient slot (`gsi::gpu::Gpu::backward`): d mean (2),
+    /// d conic (3), d opacity, d colour (3).
+    pub fn from_slot(g: &[f32; 9]) -> ProjGrad {
+        ProjGrad {
+            mean: [g[0], g[1]],
+            conic: [g[2], g[3], g[4]],
+            opacity: g[5],
+            color: [g[6], g[7], g[8]],
+        }
+    }
+
     fn add(&mut self, o: &ProjGrad) {
         for k in 0..2 {
             self.mean[k] += o.mean[k];

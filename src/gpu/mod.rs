@@ -142,6 +142,7 @@ impl Gpu {
     /// Render `scene` at `width × height`: the same pixels as [`crate::render::render`],
     /// within the rounding of `exp`.
     pub fn render(&self, scene: &Scene, width: u32, height: u32) -> Result<RgbImage> {
+        // Before projecting: a zero or oversized output is refused, not projected for.
         Limits::default().check_output(width, height)?;
         if !scene.gaussians.is_consistent() {
             return Err(Error::new(

@@ -56,7 +56,7 @@ pub fn run(args: Args) -> Result<(), Failure> {
     let (w, ht) = output_size(h.width, h.height, &args)?;
     Limits::default().check_output(w, ht)?;
     // Refuse an unsupported output format before any rendering (or GPU start-up).
-    encode_image(&[0; 3], 1, 1, &args.output)?;
+    let format = format_of(&args.output)?;
     let scene = f.records.to_scene();
     let image = match device::open(args.device, "decoding", false)? {
         None => gsi::render::render(&scene, w, ht)?,
@@ -73,32 +73,42 @@ pub fn run(args: Args) -> Result<(), Failure> {
             Err(e) => return Err(e.into()),
         },
     };
-    let bytes = encode_image(&image.to_rgb8(), w, ht, &args.output)?;
+    let bytes = encode_image(&image.to_rgb8(), w, ht, format)?;
     io::write_output(&args.output, &bytes)
         .map_err(|e| Failure(format!("{}: {e}", args.output.display())))
 }
 
-/// PNG unless the output path ends in .jpg/.jpeg.
-fn encode_image(rgb: &[u8], w: u32, h: u32, path: &Path) -> Result<Vec<u8>, Failure> {
-    use image::ImageEncoder;
+/// What `gsi decode` writes.
+#[derive(Clone, Copy)]
+enum ImageFormat {
+    Png,
+    Jpeg,
+}
+
+/// PNG unless the output path ends in .jpg/.jpeg; other extensions are refused.
+fn format_of(path: &Path) -> Result<ImageFormat, Failure> {
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
         .map(str::to_ascii_lowercase);
-    let mut out = Vec::new();
     match ext.as_deref() {
-        Some("jpg" | "jpeg") => image::codecs::jpeg::JpegEncoder::new_with_quality(&mut out, 95)
-            .write_image(rgb, w, h, image::ExtendedColorType::Rgb8)?,
-        None | Some("png") => image::codecs::png::PngEncoder::new(&mut out).write_image(
-            rgb,
-            w,
-            h,
-            image::ExtendedColorType::Rgb8,
-        )?,
-        Some(other) => {
-            return Err(Failure(format!(
-                "unsupported output format .{other} (use .png or .jpg)"
-            )))
+        Some("jpg" | "jpeg") => Ok(ImageFormat::Jpeg),
+        None | Some("png") => Ok(ImageFormat::Png),
+        Some(other) => Err(Failure(format!(
+            "unsupported output format .{other} (use .png or .jpg)"
+        ))),
+    }
+}
+
+fn encode_image(rgb: &[u8], w: u32, h: u32, format: ImageFormat) -> Result<Vec<u8>, Failure> {
+    use image::ImageEncoder;
+    let mut out = Vec::new();
+    let color = image::ExtendedColorType::Rgb8;
+    match format {
+        ImageFormat::Jpeg => image::codecs::jpeg::JpegEncoder::new_with_quality(&mut out, 95)
+            .write_image(rgb, w, h, color)?,
+        ImageFormat::Png => {
+            image::codecs::png::PngEncoder::new(&mut out).write_image(rgb, w, h, color)?
         }
     }
     Ok(out)

@@ -157,7 +157,9 @@ pub fn run(args: Args) -> Result<(), Failure> {
             },
             ..EnhanceOptions::default()
         };
-        let scene = enhance::base_scene(&file, &limits).map_err(named)?;
+        let scene = enhance::base_records(&file, &limits)
+            .map_err(named)?
+            .to_scene();
         let luma = scene_luma(&scene, opts.work_side);
         if luma > LOW_LIGHT_LUMA && !args.force {
             say(format!(
