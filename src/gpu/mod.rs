@@ -95,20 +95,20 @@ impl Gpu {
             ..Default::default()
         }))
         .map_err(|e| GpuError(format!("{}: {e}", info.name)))?;
-        // Binding 0 is the uniform block; the others are storage buffers, read-only
-        // except the last (the output).
-        let render = Kernel::new(&device, "render", shader!("render"), 6);
+        let render = Kernel::new(&device, "render", shader!("render"), 4, 1);
         let backward_sum = Kernel::new(
             &device,
             "backward_sum",
             shader!("backward_bindings", "backward_sum"),
-            7,
+            5,
+            1,
         );
         let backward_alpha = Kernel::new(
             &device,
             "backward_alpha",
             shader!("backward_bindings", "backward_alpha"),
-            7,
+            5,
+            1,
         );
         let max_binding = limits
             .max_storage_buffer_binding_size
@@ -360,28 +360,14 @@ impl Gpu {
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let entries: Vec<wgpu::BindGroupEntry> = inputs
-            .iter()
-            .chain(std::iter::once(&out_buf))
-            .enumerate()
-            .map(|(binding, b)| wgpu::BindGroupEntry {
-                binding: binding as u32,
-                resource: b.as_entire_binding(),
-            })
-            .collect();
-        let bind = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: None,
-            layout: &kernel.layout,
-            entries: &entries,
-        });
+        let buffers: Vec<&wgpu::Buffer> = inputs.iter().chain(std::iter::once(&out_buf)).collect();
+        let bind = kernel.bind(&self.device, &buffers);
         let mut enc = self
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
         {
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
-            pass.set_pipeline(&kernel.pipeline);
-            pass.set_bind_group(0, &bind, &[]);
-            pass.dispatch_workgroups(groups.0, groups.1, 1);
+            kernel.dispatch(&mut pass, &bind, groups);
         }
         enc.copy_buffer_to_buffer(&out_buf, 0, &read_buf, 0, out_bytes);
         self.queue.submit([enc.finish()]);
@@ -412,15 +398,23 @@ impl Gpu {
 }
 
 /// A compute pipeline and the layout of its one bind group.
-struct Kernel {
+pub(crate) struct Kernel {
     pipeline: wgpu::ComputePipeline,
     layout: wgpu::BindGroupLayout,
 }
 
 impl Kernel {
-    /// Entry point `main` of `source`; binding 0 a uniform block, then storage buffers,
-    /// read-only but for the last, `bindings` in all.
-    fn new(device: &wgpu::Device, label: &str, source: &str, bindings: u32) -> Kernel {
+    /// Entry point `main` of `source`. Binding 0 is a uniform block, then come `reads`
+    /// read-only storage buffers, then `writes` read-write ones: every shader of this
+    /// crate declares its bindings in that order.
+    pub(crate) fn new(
+        device: &wgpu::Device,
+        label: &str,
+        source: &str,
+        reads: u32,
+        writes: u32,
+    ) -> Kernel {
+        let bindings = 1 + reads + writes;
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some(label),
             source: wgpu::ShaderSource::Wgsl(source.into()),
@@ -434,7 +428,7 @@ impl Kernel {
                         wgpu::BufferBindingType::Uniform
                     } else {
                         wgpu::BufferBindingType::Storage {
-                            read_only: binding + 1 < bindings,
+                            read_only: binding <= reads,
                         }
                     },
                     has_dynamic_offset: false,
@@ -461,6 +455,35 @@ impl Kernel {
             cache: None,
         });
         Kernel { pipeline, layout }
+    }
+
+    /// A bind group of `buffers`, in binding order.
+    pub(crate) fn bind(&self, device: &wgpu::Device, buffers: &[&wgpu::Buffer]) -> wgpu::BindGroup {
+        let entries: Vec<wgpu::BindGroupEntry> = buffers
+            .iter()
+            .enumerate()
+            .map(|(binding, b)| wgpu::BindGroupEntry {
+                binding: binding as u32,
+                resource: b.as_entire_binding(),
+            })
+            .collect();
+        device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: None,
+            layout: &self.layout,
+            entries: &entries,
+        })
+    }
+
+    /// Record a dispatch of `groups` workgroups bound to `bind` into `pass`.
+    pub(crate) fn dispatch(
+        &self,
+        pass: &mut wgpu::ComputePass<'_>,
+        bind: &wgpu::BindGroup,
+        groups: (u32, u32),
+    ) {
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, bind, &[]);
+        pass.dispatch_workgroups(groups.0, groups.1, 1);
     }
 }
 
