@@ -8,7 +8,7 @@
 // no atomics are needed and the result does not depend on scheduling.
 //
 // Bindings, `Params` and `SLOT` are in `backward_bindings.wgsl`, the contract constants in
-// `contract.wgsl`: the host prepends both.
+// the prelude the host writes from the Rust constants (`gpu::contract`): it prepends both.
 
 const PIXELS: u32 = 256u;
 

@@ -6,7 +6,7 @@
 // CPU, whose arithmetic this follows term by term).
 //
 // Bindings, `Params` and `SLOT` are in `backward_bindings.wgsl`, the contract constants in
-// `contract.wgsl`: the host prepends both.
+// the prelude the host writes from the Rust constants (`gpu::contract`): it prepends both.
 
 @compute @workgroup_size(64, 1, 1)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {

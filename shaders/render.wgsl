@@ -7,7 +7,8 @@
 // than bit for bit. Projection (covariance clamps, conic, pixel box) and binning are done
 // once on the CPU by `render::project`, so every renderer shares them.
 //
-// The contract constants (TILE, ALPHA_MIN, …) are in `contract.wgsl`, prepended by the host.
+// The contract constants (TILE, ALPHA_MIN, …) are prepended by the host, written from the
+// Rust constants (`gpu::contract`).
 
 struct Params {
     width: u32,

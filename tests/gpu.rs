@@ -253,3 +253,64 @@ fn a_gpu_fit_matches_a_cpu_fit() {
         );
     }
 }
+
+/// The fitting loop resident on the GPU takes the CPU's steps: from the same start, the
+/// same losses, PSNRs and parameters after several Adam steps (quantization-aware ones
+/// included), both blend modes.
+#[cfg(feature = "encode")]
+#[test]
+fn resident_steps_follow_the_cpu_steps() {
+    use gsi::fit::{default_bits, Fitter, Init, LearningRates, Loss};
+    let Some(gpu) = gpu() else { return };
+    let (w, h) = (83, 61);
+    let source = random_scene(31, SceneSpec::new(w, h, 300, Blend::Sum));
+    let mut target = gsi::render::render(&source, w, h).unwrap();
+    target.data.iter_mut().for_each(|v| *v = v.clamp(0.0, 1.0));
+    let lr = LearningRates {
+        position: 2e-4,
+        log_scale: 0.01,
+        rotation: 0.01,
+        color: 0.005,
+        opacity: 0.01,
+    };
+    for blend in [Blend::Sum, Blend::Alpha] {
+        let bits = default_bits(w, h, blend);
+        let mut cpu = Fitter::new(&target, 200, Init::Adaptive, blend, Loss::L2, 3);
+        let mut on_gpu = Fitter::new(&target, 200, Init::Adaptive, blend, Loss::L2, 3);
+        on_gpu.use_gpu(&gpu);
+        for it in 0..12 {
+            let qat = (it >= 8).then_some(bits);
+            let a = cpu.step(&lr, qat, true).unwrap();
+            let b = on_gpu.step(&lr, qat, true).unwrap();
+            eprintln!("{blend:?} step {it}: CPU {a:?} GPU {b:?}");
+            assert!(
+                ((a.0 - b.0) / a.0).abs() < 1e-3 && (a.1 - b.1).abs() < 0.05,
+                "{blend:?} step {it}: {a:?} vs {b:?}"
+            );
+        }
+        on_gpu.sync();
+        let (p, q) = (&cpu.params, &on_gpu.params);
+        assert_eq!(p.len(), q.len());
+        let flat = |s: &gsi::model::GaussianSet| -> Vec<f32> {
+            (0..s.len())
+                .flat_map(|i| {
+                    let mut v = s.positions[i].to_vec();
+                    v.extend(s.cov[i]);
+                    v.extend(s.colors[i]);
+                    v.extend(s.opacity.as_ref().map(|o| o[i]));
+                    v
+                })
+                .collect()
+        };
+        let (p, q) = (flat(p), flat(q));
+        let diff: f64 = p
+            .iter()
+            .zip(&q)
+            .map(|(a, b)| f64::from(a - b).powi(2))
+            .sum();
+        let norm: f64 = p.iter().map(|a| f64::from(*a).powi(2)).sum();
+        let rel = (diff / norm).sqrt();
+        eprintln!("{blend:?}: parameters after 12 steps differ by {rel:.2e} (relative)");
+        assert!(rel < 1e-4, "{blend:?}: relative difference {rel}");
+    }
+}

@@ -28,6 +28,10 @@ impl LossFn {
         }
     }
 
+    pub fn kind(&self) -> Loss {
+        self.kind
+    }
+
     /// Loss value and `dL/dimage` for interleaved RGB images in `[0, 1]`.
     pub fn eval(
         &mut self,

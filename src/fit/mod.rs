@@ -141,9 +141,13 @@ pub struct Fitter<'a> {
     adam: params::Adam,
     loss: loss::LossFn,
     seed: u64,
-    /// Where the forward and backward passes of [`Fitter::step`] run, when not the CPU.
+    /// Where [`Fitter::step`] runs, when not on the CPU.
     #[cfg(feature = "gpu")]
     gpu: Option<&'a crate::gpu::Gpu>,
+    /// The L2 fit living on the GPU between [`Fitter::sync`]s; while it exists,
+    /// `params` and `adam` are those of the last sync.
+    #[cfg(feature = "gpu")]
+    resident: Option<crate::gpu::fit::ResidentFit<'a>>,
 }
 
 impl<'a> Fitter<'a> {
@@ -166,6 +170,8 @@ impl<'a> Fitter<'a> {
             seed,
             #[cfg(feature = "gpu")]
             gpu: None,
+            #[cfg(feature = "gpu")]
+            resident: None,
         };
         if init == Init::Adaptive {
             f.solve_colors(20);
@@ -183,6 +189,7 @@ impl<'a> Fitter<'a> {
         }
     }
 
+    /// The current parameters as a scene; after [`Fitter::sync`] when fitting on a GPU.
     pub fn scene(&self) -> Scene {
         self.scene_of(self.params.clone())
     }
@@ -196,6 +203,7 @@ impl<'a> Fitter<'a> {
 
     /// Replace the colours by their least-squares optimum for the current geometry.
     pub fn solve_colors(&mut self, iterations: usize) {
+        self.sync();
         let (w, h) = (self.target.width, self.target.height);
         let scene = self.scene();
         let mut projected = project_scene(&scene, w, h);
@@ -213,14 +221,19 @@ impl<'a> Fitter<'a> {
     }
 
     /// One optimizer step. With `qat`, the forward pass renders the quantized parameters
-    /// and their gradient is applied to the float ones (straight-through). Returns the
-    /// loss and, when `measure` is set, the PSNR of the image the step rendered.
+    /// and their gradient is applied to the float ones (straight-through). When `measure`
+    /// is set, returns the loss and the PSNR of the image the step rendered (a GPU fit
+    /// reads nothing back otherwise).
     pub fn step(
         &mut self,
         lr: &LearningRates,
         qat: Option<BitDepths>,
         measure: bool,
-    ) -> (f32, Option<f64>) {
+    ) -> Option<(f32, f64)> {
+        #[cfg(feature = "gpu")]
+        if let Some(done) = self.step_resident(lr, qat, measure) {
+            return done;
+        }
         let (w, h) = (self.target.width, self.target.height);
         let used = match qat {
             Some(bits) => self.quantized(bits),
@@ -232,15 +245,80 @@ impl<'a> Fitter<'a> {
         let mut grads = params::zero_grads(&self.params);
         params::chain(&scene.gaussians, &projected, &pg, w, h, &mut grads);
         self.adam.step(&mut self.params, &grads, lr);
-        (value, psnr)
+        psnr.map(|p| (value, p))
     }
 
-    /// Run this fitter's forward and backward passes on `gpu` (the loss, the chain rule
-    /// and Adam stay on the CPU). If the GPU fails during a step, the fitter says so once
-    /// and continues on the CPU.
+    /// Take this fitter's steps on `gpu`. With the L2 loss the whole step runs there
+    /// ([`crate::gpu::fit`]) and the state comes back only at [`Fitter::sync`]; with the
+    /// MS-SSIM loss the render and backward passes run there and the rest on the CPU.
+    /// If the GPU fails, the fitter says so once and continues on the CPU.
     #[cfg(feature = "gpu")]
     pub fn use_gpu(&mut self, gpu: &'a crate::gpu::Gpu) {
         self.gpu = Some(gpu);
+    }
+
+    /// Bring the parameters and Adam's state back from the GPU, if they live there, so
+    /// that `params` and [`Fitter::scene`] are current. Pruning, colour solves and
+    /// the final measurement call it themselves.
+    pub fn sync(&mut self) {
+        #[cfg(feature = "gpu")]
+        if let Some(resident) = self.resident.take() {
+            match resident.download() {
+                Ok((params, adam)) => {
+                    self.params = params;
+                    self.adam.set_state(adam);
+                }
+                Err(e) => self.gpu_failed(&e),
+            }
+        }
+    }
+
+    /// A step of the resident GPU fit, or `None` where this fitter does not take one
+    /// (no GPU, a loss other than L2, or the GPU failed and the step falls to the CPU).
+    #[cfg(feature = "gpu")]
+    fn step_resident(
+        &mut self,
+        lr: &LearningRates,
+        qat: Option<BitDepths>,
+        measure: bool,
+    ) -> Option<Option<(f32, f64)>> {
+        let gpu = self.gpu?;
+        if self.loss.kind() != Loss::L2 {
+            return None;
+        }
+        if self.resident.is_none() {
+            let state = self.adam.state();
+            match crate::gpu::fit::ResidentFit::new(
+                gpu,
+                self.target,
+                self.blend,
+                &self.params,
+                &state,
+            ) {
+                Ok(r) => self.resident = Some(r),
+                Err(e) => {
+                    self.gpu_failed(&e);
+                    return None;
+                }
+            }
+        }
+        let resident = self.resident.as_mut()?;
+        match resident.step(lr, qat, measure) {
+            Ok(report) => Some(report.map(|r| (r.loss, r.psnr))),
+            Err(e) => {
+                // What the GPU holds may be lost: go on from the last sync.
+                self.resident = None;
+                self.gpu_failed(&e);
+                None
+            }
+        }
+    }
+
+    #[cfg(feature = "gpu")]
+    fn gpu_failed(&mut self, e: &Error) {
+        eprintln!("gsi: the GPU failed ({e}); fitting continues on the CPU");
+        self.gpu = None;
+        self.resident = None;
     }
 
     /// The step's render, loss (with the PSNR when `measure`) and gradients: on the GPU
@@ -265,10 +343,7 @@ impl<'a> Fitter<'a> {
             };
             match on_gpu() {
                 Ok(done) => return done,
-                Err(e) => {
-                    eprintln!("gsi: the GPU failed ({e}); fitting continues on the CPU");
-                    self.gpu = None;
-                }
+                Err(e) => self.gpu_failed(&e),
             }
         }
         let fwd = raster::forward(projected, self.blend, w, h);
@@ -309,6 +384,7 @@ impl<'a> Fitter<'a> {
     /// `keep_at_most` (the most useful), then add Gaussians where the error is largest
     /// until there are `n`. Returns how many were removed.
     pub fn prune_and_grow(&mut self, min_score: f32, keep_at_most: usize, n: usize) -> usize {
+        self.sync();
         let (score, image) = self.contributions();
         let mut order: Vec<usize> = (0..score.len()).collect();
         order.sort_by(|&a, &b| score[b].total_cmp(&score[a]).then(a.cmp(&b)));
@@ -380,9 +456,9 @@ pub fn encode(
     encode_inner(target, opts, &mut |_| {}, on_progress)
 }
 
-/// [`encode`] with each optimizer step's forward and backward passes on `gpu`
-/// ([`Fitter::use_gpu`]); initialization, colour solves, pruning and the final
-/// measurement stay on the CPU.
+/// [`encode`] with the optimizer steps on `gpu` ([`Fitter::use_gpu`]: the whole step with
+/// the L2 loss, the render and backward passes with MS-SSIM); initialization, colour
+/// solves, pruning and the final measurement stay on the CPU.
 #[cfg(feature = "gpu")]
 pub fn encode_on_gpu(
     target: &Target,
@@ -441,8 +517,8 @@ fn encode_inner<'a>(
                 }
                 let qat = (it >= qat_from).then_some(bits);
                 let measure = it % 10 == 0 || it + 1 == total;
-                let (loss, psnr) = fitter.step(&opts.lr.scaled(schedule(it, total)), qat, measure);
-                if let Some(psnr) = psnr {
+                let done = fitter.step(&opts.lr.scaled(schedule(it, total)), qat, measure);
+                if let Some((loss, psnr)) = done {
                     report(it + 1, total, fitter.params.len(), loss, psnr, curve);
                     if stop_at.is_some_and(|p| qat.is_some() && psnr >= p) {
                         break;
@@ -455,7 +531,7 @@ fn encode_inner<'a>(
         _ => None,
     };
     run(&mut fitter, opts.iterations, &mut curve, stop_at);
-    let mut result = finish(&fitter, bits, opts)?;
+    let mut result = finish(&mut fitter, bits, opts)?;
     // Budgets: shrink to the byte budget, or grow to the quality target.
     for _ in 0..4 {
         match opts.budget {
@@ -484,14 +560,15 @@ fn encode_inner<'a>(
             &mut curve,
             stop_at,
         );
-        result = finish(&fitter, bits, opts)?;
+        result = finish(&mut fitter, bits, opts)?;
     }
     result.curve = curve;
     Ok(result)
 }
 
 /// Quantize, drop what the 8-bit render cannot show, write, and measure the stored PSNR.
-fn finish(fitter: &Fitter, bits: BitDepths, opts: &EncodeOptions) -> Result<Encoded, Error> {
+fn finish(fitter: &mut Fitter, bits: BitDepths, opts: &EncodeOptions) -> Result<Encoded, Error> {
+    fitter.sync();
     let t = fitter.target;
     let mut scene = fitter.scene();
     // A Gaussian whose whole contribution is under one 8-bit step changes nothing visible.

@@ -138,6 +138,27 @@ impl Adam {
         }
     }
 
+    /// A copy of the state, for an optimizer that continues elsewhere (the GPU fit).
+    #[cfg(feature = "gpu")]
+    pub(crate) fn state(&self) -> crate::gpu::fit::AdamState {
+        crate::gpu::fit::AdamState {
+            step: self.step,
+            beta1: self.beta1,
+            beta2: self.beta2,
+            eps: self.eps,
+            m: self.m.clone(),
+            v: self.v.clone(),
+        }
+    }
+
+    /// Continue from `state` (as [`Adam::state`] gave it, moved on elsewhere).
+    #[cfg(feature = "gpu")]
+    pub(crate) fn set_state(&mut self, state: crate::gpu::fit::AdamState) {
+        self.step = state.step;
+        self.m = state.m;
+        self.v = state.v;
+    }
+
     pub fn step(&mut self, params: &mut GaussianSet, grads: &GaussianSet, lr: &LearningRates) {
         self.step += 1;
         let (b1, b2, eps) = (self.beta1, self.beta2, self.eps);

@@ -1,13 +1,15 @@
-//! Rendering and its backward pass on a GPU, with wgpu compute shaders (`shaders/`).
+//! Rendering and fitting on a GPU, with wgpu compute shaders (`shaders/`).
 //!
-//! The GPU renders the same pixels as [`crate::render`]: projection and tile binning are
-//! the CPU's own ([`project_scene`]), and the shader evaluates spec §6 per pixel in the
-//! same `f32` order, so the only difference is the rounding of `exp` (within 1/255 after
-//! 8-bit conversion; `tests/gpu.rs` holds it to that). [`Gpu::backward`] gives the
-//! gradients `fit::raster::backward` gives, for both blend modes, with no atomics: each
-//! tile writes one slot per list entry and the host sums them in a fixed order. The
-//! fitter uses both for its steps ([`crate::fit::Fitter::use_gpu`]); projection, the loss,
-//! the chain rule and Adam still run on the CPU.
+//! - [`Gpu::render`] gives the pixels of [`crate::render`]: projection and tile binning
+//!   are the CPU's own ([`project_scene`]), and the shader evaluates spec §6 per pixel in
+//!   the same `f32` order, so the only difference is the rounding of `exp` (within 1/255
+//!   after 8-bit conversion; `tests/gpu.rs` holds it to that).
+//! - [`Gpu::backward`] gives the gradients `fit::raster::backward` gives, for both blend
+//!   modes, with no atomics: each tile writes one slot per list entry and the slots are
+//!   summed in a fixed order.
+//! - [`fit::ResidentFit`] is stage 1's whole optimizer step on the GPU (projection,
+//!   deterministic binning by a stable radix sort, render, L2 loss, backward, chain rule,
+//!   Adam), reading back only progress reports. [`crate::fit::Fitter::use_gpu`] uses it.
 //!
 //! The adapter is headless (no surface) and honours wgpu's environment variables:
 //! `WGPU_BACKEND` (e.g. `vulkan`), `WGPU_ADAPTER_NAME` (a substring of the adapter's
@@ -19,15 +21,52 @@ use crate::model::{Blend, Scene};
 use crate::render::{project_scene, Projected, RgbImage, TILE};
 use wgpu::util::DeviceExt;
 
-/// A shader's source: the shared contract constants, then the shader itself.
+/// A shader's source: the contract constants ([`contract`]), then the named files of
+/// `shaders/` in order (WGSL has no includes).
 macro_rules! shader {
     ($($name:literal),+) => {
-        concat!(
-            include_str!("../../shaders/contract.wgsl"),
-            $(include_str!(concat!("../../shaders/", $name, ".wgsl"))),+
-        )
+        $crate::gpu::with_contract(&[$(include_str!(concat!("../../shaders/", $name, ".wgsl"))),+])
     };
 }
+
+/// The constants of the pixel contract (format-spec.md §6) and of the model, written as
+/// WGSL from the Rust constants themselves, so that no shader can drift from the CPU.
+fn contract() -> String {
+    use crate::model::{LN_SIGMA_MAX, LN_SIGMA_MIN};
+    use crate::render::{
+        ALPHA_MAX, ALPHA_MIN, COLOR_MAX, CORRELATION_MAX, EXTENT_SIGMAS, TRANSMITTANCE_MIN,
+        VAR_MAX, VAR_MIN,
+    };
+    let floats = [
+        ("ALPHA_MIN", ALPHA_MIN),
+        ("ALPHA_MAX", ALPHA_MAX),
+        ("TRANSMITTANCE_MIN", TRANSMITTANCE_MIN),
+        ("VAR_MIN", VAR_MIN),
+        ("VAR_MAX", VAR_MAX),
+        ("CORRELATION_MAX", CORRELATION_MAX),
+        ("EXTENT_SIGMAS", EXTENT_SIGMAS),
+        ("COLOR_MAX", COLOR_MAX),
+        ("LN_SIGMA_MIN", LN_SIGMA_MIN),
+        ("LN_SIGMA_MAX", LN_SIGMA_MAX),
+    ];
+    let mut out = format!("const TILE: u32 = {TILE}u;\n");
+    for (name, value) in floats {
+        // `{:?}` prints the shortest decimal that reads back as the same f32.
+        out += &format!("const {name}: f32 = {value:?};\n");
+    }
+    out
+}
+
+pub(crate) fn with_contract(parts: &[&str]) -> String {
+    let mut source = contract();
+    for part in parts {
+        source.push_str(part);
+    }
+    source
+}
+
+pub mod fit;
+mod sort;
 
 /// Why no GPU can be used.
 #[derive(Debug)]
@@ -51,6 +90,10 @@ pub struct Gpu {
     info: wgpu::AdapterInfo,
     /// Largest storage binding, bytes.
     max_binding: u64,
+    /// Most workgroups of a dispatch along one dimension.
+    max_groups: u32,
+    /// The fitting loop's pipelines, built when a fit first needs them.
+    fit: std::sync::OnceLock<fit::FitKernels>,
 }
 
 /// Uniform block of the shader (`Params` in `render.wgsl`).
@@ -95,18 +138,18 @@ impl Gpu {
             ..Default::default()
         }))
         .map_err(|e| GpuError(format!("{}: {e}", info.name)))?;
-        let render = Kernel::new(&device, "render", shader!("render"), 4, 1);
+        let render = Kernel::new(&device, "render", &shader!("render"), 4, 1);
         let backward_sum = Kernel::new(
             &device,
             "backward_sum",
-            shader!("backward_bindings", "backward_sum"),
+            &shader!("backward_bindings", "backward_sum"),
             5,
             1,
         );
         let backward_alpha = Kernel::new(
             &device,
             "backward_alpha",
-            shader!("backward_bindings", "backward_alpha"),
+            &shader!("backward_bindings", "backward_alpha"),
             5,
             1,
         );
@@ -121,6 +164,8 @@ impl Gpu {
             backward_alpha,
             info,
             max_binding,
+            max_groups: limits.max_compute_workgroups_per_dimension,
+            fit: std::sync::OnceLock::new(),
         })
     }
 
@@ -347,19 +392,7 @@ impl Gpu {
         groups: (u32, u32),
         out: &mut [f32],
     ) -> Result<()> {
-        let out_bytes = (out.len().max(4) * 4) as u64;
-        let out_buf = self.device.create_buffer(&wgpu::BufferDescriptor {
-            label: None,
-            size: out_bytes,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-            mapped_at_creation: false,
-        });
-        let read_buf = self.device.create_buffer(&wgpu::BufferDescriptor {
-            label: None,
-            size: out_bytes,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
+        let out_buf = self.zeroed(out.len() as u64 * 4);
         let buffers: Vec<&wgpu::Buffer> = inputs.iter().chain(std::iter::once(&out_buf)).collect();
         let bind = kernel.bind(&self.device, &buffers);
         let mut enc = self
@@ -369,9 +402,44 @@ impl Gpu {
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
             kernel.dispatch(&mut pass, &bind, groups);
         }
-        enc.copy_buffer_to_buffer(&out_buf, 0, &read_buf, 0, out_bytes);
+        let [bytes] = self.read_back(enc, [&out_buf])?;
+        out.copy_from_slice(&bytemuck::cast_slice::<u8, f32>(&bytes)[..out.len()]);
+        Ok(())
+    }
+
+    /// A storage buffer of `bytes` zeros (at least 16: a binding may not be empty) that
+    /// kernels may read and write and the host may copy to and from.
+    pub(crate) fn zeroed(&self, bytes: u64) -> wgpu::Buffer {
+        self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: None,
+            size: bytes.next_multiple_of(4).max(16),
+            usage: wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_SRC
+                | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        })
+    }
+
+    /// Submit `enc` with copies of `buffers` appended, wait, and return their bytes.
+    pub(crate) fn read_back<const N: usize>(
+        &self,
+        mut enc: wgpu::CommandEncoder,
+        buffers: [&wgpu::Buffer; N],
+    ) -> Result<[Vec<u8>; N]> {
+        let total: u64 = buffers.iter().map(|b| b.size()).sum();
+        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: None,
+            size: total.max(4),
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut at = 0;
+        for b in buffers {
+            enc.copy_buffer_to_buffer(b, 0, &staging, at, b.size());
+            at += b.size();
+        }
         self.queue.submit([enc.finish()]);
-        let slice = read_buf.slice(..);
+        let slice = staging.slice(..);
         let (tx, rx) = std::sync::mpsc::channel();
         slice.map_async(wgpu::MapMode::Read, move |r| {
             let _ = tx.send(r);
@@ -385,15 +453,36 @@ impl Gpu {
                 "GPU: reading the result back failed",
             ));
         }
-        {
+        let out = {
             let view = slice
                 .get_mapped_range()
                 .map_err(|e| Error::new(ErrorKind::Io, format!("GPU: {e}")))?;
-            let values: &[f32] = bytemuck::cast_slice(&view);
-            out.copy_from_slice(&values[..out.len()]);
+            let mut at = 0usize;
+            buffers.map(|b| {
+                let part = view[at..at + b.size() as usize].to_vec();
+                at += b.size() as usize;
+                part
+            })
+        };
+        staging.unmap();
+        Ok(out)
+    }
+
+    /// Workgroups of [`fit::GROUP`] invocations for `n` items, laid out in two
+    /// dimensions when one is not enough (kernels recover the linear index).
+    pub(crate) fn groups(&self, n: u64) -> Result<(u32, u32)> {
+        let g = n.div_ceil(u64::from(fit::GROUP)).max(1);
+        let max = u64::from(self.max_groups.max(1));
+        let y = g.div_ceil(max);
+        if y > max {
+            return Err(too_big(&self.info, "this dispatch"));
         }
-        read_buf.unmap();
-        Ok(())
+        Ok((g.min(max) as u32, y as u32))
+    }
+
+    /// The fitting loop's pipelines, built on first use.
+    pub(crate) fn fit_kernels(&self) -> &fit::FitKernels {
+        self.fit.get_or_init(|| fit::FitKernels::new(&self.device))
     }
 }
 

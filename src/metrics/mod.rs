@@ -33,7 +33,7 @@ pub use enhancement::{de, eme, gt_mean, loe, luma, EME_BLOCK, EME_EPS, LOE_ROWS}
 pub use filter::Real;
 pub use loss::{ms_ssim_loss_grad, ssim_loss_grad, LossWorkspace};
 pub use niqe::{niqe, NIQE_PATCH};
-pub use psnr::psnr;
+pub use psnr::{psnr, psnr_of_sse};
 pub use ssim::{ms_ssim, ssim, MS_SSIM_WEIGHTS};
 
 use std::fmt;

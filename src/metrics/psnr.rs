@@ -19,9 +19,15 @@ pub fn psnr(reference: Rgb8<'_>, image: Rgb8<'_>) -> Result<f64, MetricError> {
             d * d
         })
         .sum();
+    Ok(psnr_of_sse(sse, reference.data.len() as u64))
+}
+
+/// PSNR (dB) of 8-bit values from their summed squared error over `values` values:
+/// infinite when they agree. For callers that sum the error themselves (the GPU fit).
+pub fn psnr_of_sse(sse: u64, values: u64) -> f64 {
     if sse == 0 {
-        return Ok(f64::INFINITY);
+        return f64::INFINITY;
     }
-    let mse = sse as f64 / reference.data.len() as f64;
-    Ok(10.0 * (255.0f64 * 255.0 / mse).log10())
+    let mse = sse as f64 / values as f64;
+    10.0 * (255.0f64 * 255.0 / mse).log10()
 }

@@ -1,0 +1,55 @@
+
+// Shared by the kernels of the fitting loop (`src/gpu/fit.rs`); the host prepends it.
+//
+// A Gaussian's parameters are STRIDE floats, in the stored parameterization the CPU
+// fitter moves (`fit::params`): centre (u, v) in image units, ln σ1, ln σ2, θ, colour
+// (r, g, b), opacity. The Adam moments use the same layout.
+
+const STRIDE: u32 = 9u;
+// Invocations per workgroup of every one-dimensional kernel.
+const GROUP: u32 = 256u;
+
+// One uniform block for the whole loop, rewritten by the host before each step.
+struct Fit {
+    width: u32,
+    height: u32,
+    tiles_x: u32,
+    tiles_y: u32,
+    // Gaussians.
+    count: u32,
+    // Tile-list entries the buffers hold.
+    capacity: u32,
+    // 0 = sum, 1 = alpha.
+    blend: u32,
+    has_opacity: u32,
+    // Render the quantized parameters (quantization-aware fine-tuning).
+    qat: u32,
+    bits_position: u32,
+    bits_covariance: u32,
+    bits_color: u32,
+    bits_opacity: u32,
+    lr_position: f32,
+    lr_log_scale: f32,
+    lr_rotation: f32,
+    lr_color: f32,
+    lr_opacity: f32,
+    // Adam's bias corrections for this step, 1 - β^t.
+    c1: f32,
+    c2: f32,
+    beta1: f32,
+    beta2: f32,
+    eps: f32,
+    _pad: u32,
+}
+
+@group(0) @binding(0) var<uniform> fit: Fit;
+
+// The index of an invocation of a one-dimensional kernel, whose workgroups the host lays
+// out in two dimensions when there are more than a dimension allows.
+fn linear_id(wg: vec3<u32>, groups: vec3<u32>, lid: u32) -> u32 {
+    return (wg.y * groups.x + wg.x) * GROUP + lid;
+}
+
+fn workgroup_index(wg: vec3<u32>, groups: vec3<u32>) -> u32 {
+    return wg.y * groups.x + wg.x;
+}

@@ -1,0 +1,662 @@
+//! The fitting loop resident on the GPU: every step of stage 1's optimizer without the
+//! CPU.
+//!
+//! The parameters, Adam's moments, the target and every intermediate stay in GPU
+//! buffers. A step is one submission of these kernels, in order:
+//! 1. `fit_range` (quantization-aware steps only): each component's range, as
+//!    `Quantizer::fit` takes it.
+//! 2. `fit_project`: the rendered parameters (quantized when asked) projected as
+//!    `render::project` does, and the tiles each covers.
+//! 3. `fit_scan`, `fit_emit`, the radix sort ([`super::sort`]) and `fit_tiles`: tile lists
+//!    holding each tile's Gaussians in stored order, deterministically.
+//! 4. `render` and `fit_loss`: the image, the L2 loss and its gradient.
+//! 5. `backward_sum` or `backward_alpha`: per-entry gradient slots.
+//! 6. `fit_adam`: gather, chain rule and Adam.
+//!
+//! The host writes one uniform block per step (learning rates, bias corrections) and reads
+//! back only when asked for progress: the partial sums of the loss and of the 8-bit
+//! squared error, and the number of tile-list entries, which is how the buffers learn
+//! that they must grow. A step whose lists overflowed is skipped on the GPU
+//! (`fit_adam.wgsl`); with the lists sized at twice the last count seen, that takes a
+//! Gaussian set whose tile coverage more than doubles between two progress reports.
+//!
+//! Pruning, re-placement and colour solves stay on the CPU ([`crate::fit::Fitter`]): the
+//! fitter downloads the state before them and uploads it after, a few times per fit.
+
+use super::sort::{RadixSort, SortPlan};
+use super::{too_big, Gpu, Kernel};
+use crate::fit::LearningRates;
+use crate::format::{BitDepths, Error, ErrorKind, Result};
+use crate::model::{Blend, GaussianSet};
+use crate::model::{CovParam, Scene};
+use crate::render::{project_scene, RgbImage, TILE};
+use wgpu::util::DeviceExt;
+
+/// Floats per Gaussian in the parameter and moment buffers (`STRIDE` of
+/// `fit_common.wgsl`): u, v, ln σ1, ln σ2, θ, r, g, b, opacity.
+const STRIDE: usize = 9;
+/// Invocations per workgroup of the one-dimensional kernels (`GROUP`).
+pub(crate) const GROUP: u32 = 256;
+/// Floats per tile-list entry written by the backward passes (`SLOT`).
+const SLOT: u64 = 9;
+
+/// The pipelines of the loop, built the first time a fit runs on a device.
+pub(crate) struct FitKernels {
+    range: Kernel,
+    project: Kernel,
+    scan: Kernel,
+    emit: Kernel,
+    tiles: Kernel,
+    loss: Kernel,
+    adam: Kernel,
+    sort: RadixSort,
+}
+
+impl FitKernels {
+    pub(crate) fn new(device: &wgpu::Device) -> FitKernels {
+        let k = |label, source: String, reads, writes| {
+            Kernel::new(device, label, &source, reads, writes)
+        };
+        FitKernels {
+            range: k("fit_range", shader!("fit_common", "fit_range"), 1, 1),
+            project: k("fit_project", shader!("fit_common", "fit_project"), 2, 3),
+            scan: k("fit_scan", shader!("fit_common", "fit_scan"), 1, 2),
+            emit: k("fit_emit", shader!("fit_common", "fit_emit"), 2, 2),
+            tiles: k("fit_tiles", shader!("fit_common", "fit_tiles"), 2, 1),
+            loss: k("fit_loss", shader!("fit_common", "fit_loss"), 2, 3),
+            adam: k("fit_adam", shader!("fit_common", "fit_adam"), 6, 2),
+            sort: RadixSort::new(device),
+        }
+    }
+}
+
+/// The uniform block `Fit` of `fit_common.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct FitUniform {
+    width: u32,
+    height: u32,
+    tiles_x: u32,
+    tiles_y: u32,
+    count: u32,
+    capacity: u32,
+    blend: u32,
+    has_opacity: u32,
+    qat: u32,
+    bits: [u32; 4],
+    lr: [f32; 5],
+    c1: f32,
+    c2: f32,
+    beta1: f32,
+    beta2: f32,
+    eps: f32,
+    _pad: u32,
+}
+
+/// Adam's state as the CPU fitter keeps it ([`crate::fit::params::Adam`]).
+pub struct AdamState {
+    /// Steps taken so far.
+    pub step: i32,
+    pub beta1: f32,
+    pub beta2: f32,
+    pub eps: f32,
+    /// First and second moments, shaped like the parameters.
+    pub m: GaussianSet,
+    pub v: GaussianSet,
+}
+
+/// What a step measured, when asked.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepReport {
+    /// L2 loss of the rendered image.
+    pub loss: f32,
+    /// PSNR (dB, 8-bit) of the rendered image, as `fit::loss::psnr8` computes it.
+    pub psnr: f64,
+}
+
+/// The buffers whose size is fixed by the image and the number of Gaussians.
+struct Buffers {
+    fit: wgpu::Buffer,
+    params: wgpu::Buffer,
+    moments: wgpu::Buffer,
+    image: wgpu::Buffer,
+    dl: wgpu::Buffer,
+    gaussians: wgpu::Buffer,
+    boxes: wgpu::Buffer,
+    first_entry: wgpu::Buffer,
+    /// `[0]`: tile-list entries of the last step (saturating).
+    entries: wgpu::Buffer,
+    offsets: wgpu::Buffer,
+    loss_part: wgpu::Buffer,
+    sse8_part: wgpu::Buffer,
+    render_params: wgpu::Buffer,
+    backward_params: wgpu::Buffer,
+    range: wgpu::BindGroup,
+    project: wgpu::BindGroup,
+    scan: wgpu::BindGroup,
+    loss: wgpu::BindGroup,
+}
+
+/// The buffers sized by the number of tile-list entries, and what binds them.
+struct Lists {
+    capacity: u32,
+    plan: SortPlan,
+    emit: wgpu::BindGroup,
+    tiles: wgpu::BindGroup,
+    render: wgpu::BindGroup,
+    backward: wgpu::BindGroup,
+    adam: wgpu::BindGroup,
+}
+
+/// A fit living on the GPU: see the module documentation.
+pub struct ResidentFit<'g> {
+    gpu: &'g Gpu,
+    uniform: FitUniform,
+    blend: Blend,
+    count: usize,
+    has_opacity: bool,
+    adam_step: i32,
+    buffers: Buffers,
+    lists: Lists,
+    /// Capacity the lists must grow to before the next step.
+    grow_to: Option<u32>,
+    gaussian_groups: (u32, u32),
+    pixel_groups: (u32, u32),
+    tile_groups: (u32, u32),
+}
+
+impl<'g> ResidentFit<'g> {
+    /// Upload `params` (stored parameterization, `log-scale-rotation`), Adam's state and
+    /// `target`, and size every buffer. Fails when a buffer would exceed what the adapter
+    /// can bind, so that the caller can fit on the CPU instead.
+    pub fn new(
+        gpu: &'g Gpu,
+        target: &RgbImage,
+        blend: Blend,
+        params: &GaussianSet,
+        adam: &AdamState,
+    ) -> Result<ResidentFit<'g>> {
+        let (w, h) = (target.width, target.height);
+        let count = params.len();
+        if count == 0
+            || count > u32::MAX as usize / 64
+            || !params.is_consistent()
+            || adam.m.len() != count
+            || adam.v.len() != count
+            || target.data.len() != w as usize * h as usize * 3
+        {
+            return Err(Error::new(
+                ErrorKind::InvalidValue,
+                "a GPU fit needs a consistent, non-empty Gaussian set and target",
+            ));
+        }
+        let tiles_x = w.div_ceil(TILE);
+        let tiles_y = h.div_ceil(TILE);
+        let n = count as u64;
+        let pixels = u64::from(w) * u64::from(h);
+        let gaussian_groups = gpu.groups(n)?;
+        let pixel_groups = gpu.groups(pixels)?;
+        let tile_groups = gpu.groups(u64::from(tiles_x * tiles_y) + 1)?;
+        for bytes in [pixels * 12, n * STRIDE as u64 * 8, n * 48] {
+            if bytes > gpu.max_binding {
+                return Err(too_big(&gpu.info, "this fit"));
+            }
+        }
+        let has_opacity = params.opacity.is_some();
+        let uniform = FitUniform {
+            width: w,
+            height: h,
+            tiles_x,
+            tiles_y,
+            count: count as u32,
+            capacity: 0,
+            blend: u32::from(blend == Blend::Alpha),
+            has_opacity: u32::from(has_opacity),
+            qat: 0,
+            bits: [0; 4],
+            lr: [0.0; 5],
+            c1: 1.0,
+            c2: 1.0,
+            beta1: adam.beta1,
+            beta2: adam.beta2,
+            eps: adam.eps,
+            _pad: 0,
+        };
+        let buffers = Buffers::new(gpu, &uniform, target, params, adam, pixel_groups);
+        // Twice the entries of the starting set as the CPU projects it.
+        let scene = Scene {
+            width: w,
+            height: h,
+            blend,
+            cov_param: CovParam::LogScaleRotation,
+            gaussians: params.clone(),
+        };
+        let entries: u64 = project_scene(&scene, w, h)
+            .iter()
+            .map(|g| {
+                let b = g.bbox;
+                u64::from(b.x1 / TILE - b.x0 / TILE + 1) * u64::from(b.y1 / TILE - b.y0 / TILE + 1)
+            })
+            .sum();
+        let lists = Lists::new(
+            gpu,
+            &buffers,
+            blend,
+            tiles_x * tiles_y,
+            capacity_for(entries),
+        )?;
+        Ok(ResidentFit {
+            gpu,
+            uniform,
+            blend,
+            count,
+            has_opacity,
+            adam_step: adam.step,
+            buffers,
+            lists,
+            grow_to: None,
+            gaussian_groups,
+            pixel_groups,
+            tile_groups,
+        })
+    }
+
+    /// One optimizer step with learning rates `lr`; with `qat`, the render uses the
+    /// parameters quantized to those bit depths and the gradient moves the float ones
+    /// (straight-through). When `measure` is set, waits for the GPU and returns the loss
+    /// and PSNR of the image this step rendered.
+    pub fn step(
+        &mut self,
+        lr: &LearningRates,
+        qat: Option<BitDepths>,
+        measure: bool,
+    ) -> Result<Option<StepReport>> {
+        if let Some(capacity) = self.grow_to.take() {
+            let tiles = self.uniform.tiles_x * self.uniform.tiles_y;
+            self.lists = Lists::new(self.gpu, &self.buffers, self.blend, tiles, capacity)?;
+        }
+        self.adam_step += 1;
+        let u = &mut self.uniform;
+        u.capacity = self.lists.capacity;
+        u.c1 = 1.0 - u.beta1.powi(self.adam_step);
+        u.c2 = 1.0 - u.beta2.powi(self.adam_step);
+        u.lr = [lr.position, lr.log_scale, lr.rotation, lr.color, lr.opacity];
+        u.qat = u32::from(qat.is_some());
+        if let Some(b) = qat {
+            u.bits = [b.position, b.covariance, b.color, b.opacity].map(u32::from);
+        }
+        let gpu = self.gpu;
+        gpu.queue
+            .write_buffer(&self.buffers.fit, 0, bytemuck::bytes_of(&self.uniform));
+        let k = gpu.fit_kernels();
+        let (b, l) = (&self.buffers, &self.lists);
+        let tiles = (self.uniform.tiles_x, self.uniform.tiles_y);
+        let mut enc = gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        {
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
+            if qat.is_some() {
+                k.range.dispatch(&mut pass, &b.range, (1, 1));
+            }
+            k.project
+                .dispatch(&mut pass, &b.project, self.gaussian_groups);
+            k.scan.dispatch(&mut pass, &b.scan, (1, 1));
+            k.emit.dispatch(&mut pass, &l.emit, self.gaussian_groups);
+        }
+        l.plan.record(&k.sort, &mut enc);
+        {
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
+            k.tiles.dispatch(&mut pass, &l.tiles, self.tile_groups);
+            gpu.render.dispatch(&mut pass, &l.render, tiles);
+            k.loss.dispatch(&mut pass, &b.loss, self.pixel_groups);
+            let backward = match self.blend {
+                Blend::Sum => &gpu.backward_sum,
+                Blend::Alpha => &gpu.backward_alpha,
+            };
+            backward.dispatch(&mut pass, &l.backward, tiles);
+            k.adam.dispatch(&mut pass, &l.adam, self.gaussian_groups);
+        }
+        if !measure {
+            gpu.queue.submit([enc.finish()]);
+            return Ok(None);
+        }
+        let [loss_part, sse8_part, entries] =
+            gpu.read_back(enc, [&b.loss_part, &b.sse8_part, &b.entries])?;
+        let entries = u32_at(&entries, 0);
+        let loss: f64 = bytemuck::cast_slice::<u8, f32>(&loss_part)
+            .iter()
+            .map(|&x| f64::from(x))
+            .sum();
+        let sse: u64 = bytemuck::cast_slice::<u8, u32>(&sse8_part)
+            .iter()
+            .map(|&x| u64::from(x))
+            .sum();
+        let values = u64::from(self.uniform.width) * u64::from(self.uniform.height) * 3;
+        if u64::from(entries) * 4 > u64::from(self.lists.capacity) * 3 {
+            self.grow_to = Some(capacity_for(u64::from(entries)));
+        }
+        Ok(Some(StepReport {
+            loss: (loss / values as f64) as f32,
+            psnr: crate::metrics::psnr_of_sse(sse, values),
+        }))
+    }
+
+    /// The parameters and Adam's state as they are now, shaped as the CPU fitter keeps
+    /// them.
+    pub fn download(&self) -> Result<(GaussianSet, AdamState)> {
+        let enc = self
+            .gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        let [params, moments] = self
+            .gpu
+            .read_back(enc, [&self.buffers.params, &self.buffers.moments])?;
+        let params: &[f32] = bytemuck::cast_slice(&params);
+        let moments: &[f32] = bytemuck::cast_slice(&moments);
+        let n = self.count * STRIDE;
+        let o = self.has_opacity;
+        Ok((
+            unflatten(&params[..n], o),
+            AdamState {
+                step: self.adam_step,
+                beta1: self.uniform.beta1,
+                beta2: self.uniform.beta2,
+                eps: self.uniform.eps,
+                m: unflatten(&moments[..n], o),
+                v: unflatten(&moments[n..2 * n], o),
+            },
+        ))
+    }
+}
+
+impl Buffers {
+    fn new(
+        gpu: &Gpu,
+        uniform: &FitUniform,
+        target: &RgbImage,
+        params: &GaussianSet,
+        adam: &AdamState,
+        pixel_groups: (u32, u32),
+    ) -> Buffers {
+        let device = &gpu.device;
+        let kernels = gpu.fit_kernels();
+        let storage = wgpu::BufferUsages::STORAGE
+            | wgpu::BufferUsages::COPY_SRC
+            | wgpu::BufferUsages::COPY_DST;
+        let init = |contents: &[u8]| {
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: None,
+                contents,
+                usage: storage,
+            })
+        };
+        let zeroed = |bytes: u64| gpu.zeroed(bytes);
+        let uniform_of = |contents: &[u8]| {
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: None,
+                contents,
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            })
+        };
+        let n = params.len() as u64;
+        let pixels = u64::from(uniform.width) * u64::from(uniform.height);
+        let tiles = u64::from(uniform.tiles_x) * u64::from(uniform.tiles_y);
+        let loss_groups = u64::from(pixel_groups.0) * u64::from(pixel_groups.1);
+        // Every step clamps opacity to [0, 1]; the upload does the same, so the chain rule
+        // on the GPU never meets an opacity outside it.
+        let mut flat = flatten(params, 1.0);
+        for g in flat.chunks_exact_mut(STRIDE) {
+            g[8] = if g[8].is_finite() {
+                g[8].clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+        }
+        let mut moments = flatten(&adam.m, 0.0);
+        moments.extend(flatten(&adam.v, 0.0));
+        let fit = uniform_of(bytemuck::bytes_of(uniform));
+        let params = init(bytemuck::cast_slice(&flat));
+        let moments = init(bytemuck::cast_slice(&moments));
+        let target = init(bytemuck::cast_slice(&target.data));
+        let image = zeroed(pixels * 12);
+        let dl = zeroed(pixels * 12);
+        let ranges = zeroed(STRIDE as u64 * 8);
+        let gaussians = zeroed(n * 48);
+        let boxes = zeroed(n * 16);
+        let touched = zeroed(n * 4);
+        let first_entry = zeroed(n * 4);
+        let entries = zeroed(4);
+        let offsets = zeroed((tiles + 1) * 4);
+        let loss_part = zeroed(loss_groups * 4);
+        let sse8_part = zeroed(loss_groups * 4);
+        // The render and backward kernels' own uniform blocks: the whole image, one band.
+        let (w, h) = (uniform.width, uniform.height);
+        let render_params = uniform_of(bytemuck::cast_slice(&[
+            w,
+            h,
+            uniform.tiles_x,
+            uniform.blend,
+            0,
+            h,
+            0,
+            0,
+        ]));
+        let backward_params = uniform_of(bytemuck::cast_slice(&[w, h, uniform.tiles_x, 0u32]));
+        Buffers {
+            range: kernels.range.bind(device, &[&fit, &params, &ranges]),
+            project: kernels.project.bind(
+                device,
+                &[&fit, &params, &ranges, &gaussians, &boxes, &touched],
+            ),
+            scan: kernels
+                .scan
+                .bind(device, &[&fit, &touched, &first_entry, &entries]),
+            loss: kernels.loss.bind(
+                device,
+                &[&fit, &image, &target, &dl, &loss_part, &sse8_part],
+            ),
+            fit,
+            params,
+            moments,
+            image,
+            dl,
+            gaussians,
+            boxes,
+            first_entry,
+            entries,
+            offsets,
+            loss_part,
+            sse8_part,
+            render_params,
+            backward_params,
+        }
+    }
+}
+
+impl Lists {
+    fn new(gpu: &Gpu, b: &Buffers, blend: Blend, tiles: u32, capacity: u32) -> Result<Lists> {
+        if u64::from(capacity) * SLOT * 4 > gpu.max_binding {
+            return Err(too_big(&gpu.info, "the tile lists of this fit"));
+        }
+        let device = &gpu.device;
+        let k = gpu.fit_kernels();
+        let keys = gpu.zeroed(u64::from(capacity) * 4);
+        let values = gpu.zeroed(u64::from(capacity) * 4);
+        let slots = gpu.zeroed(u64::from(capacity) * SLOT * 4);
+        let key_bits = (32 - tiles.saturating_sub(1).leading_zeros()).max(1);
+        let plan = SortPlan::new(
+            device, &k.sort, &keys, &values, &b.entries, capacity, key_bits,
+        )?;
+        let backward = match blend {
+            Blend::Sum => &gpu.backward_sum,
+            Blend::Alpha => &gpu.backward_alpha,
+        };
+        Ok(Lists {
+            capacity,
+            emit: k
+                .emit
+                .bind(device, &[&b.fit, &b.boxes, &b.first_entry, &keys, &values]),
+            tiles: k
+                .tiles
+                .bind(device, &[&b.fit, &keys, &b.entries, &b.offsets]),
+            render: gpu.render.bind(
+                device,
+                &[
+                    &b.render_params,
+                    &b.gaussians,
+                    &b.boxes,
+                    &b.offsets,
+                    &values,
+                    &b.image,
+                ],
+            ),
+            backward: backward.bind(
+                device,
+                &[
+                    &b.backward_params,
+                    &b.gaussians,
+                    &b.boxes,
+                    &b.offsets,
+                    &values,
+                    &b.dl,
+                    &slots,
+                ],
+            ),
+            adam: k.adam.bind(
+                device,
+                &[
+                    &b.fit,
+                    &b.gaussians,
+                    &b.boxes,
+                    &b.offsets,
+                    &values,
+                    &slots,
+                    &b.entries,
+                    &b.params,
+                    &b.moments,
+                ],
+            ),
+            plan,
+        })
+    }
+}
+
+/// List capacity for a set that covers `entries` tile entries now: room to double.
+fn capacity_for(entries: u64) -> u32 {
+    (entries.saturating_mul(2)).clamp(4096, u64::from(u32::MAX / 64)) as u32
+}
+
+fn u32_at(bytes: &[u8], i: usize) -> u32 {
+    bytemuck::cast_slice::<u8, u32>(bytes)[i]
+}
+
+/// `STRIDE` floats per Gaussian; `opacity` stands in where the set has none.
+fn flatten(set: &GaussianSet, opacity: f32) -> Vec<f32> {
+    let mut out = Vec::with_capacity(set.len() * STRIDE);
+    for i in 0..set.len() {
+        out.extend_from_slice(&set.positions[i]);
+        out.extend_from_slice(&set.cov[i]);
+        out.extend_from_slice(&set.colors[i]);
+        out.push(set.opacity.as_ref().map_or(opacity, |o| o[i]));
+    }
+    out
+}
+
+fn unflatten(flat: &[f32], has_opacity: bool) -> GaussianSet {
+    let g = flat.chunks_exact(STRIDE);
+    GaussianSet {
+        positions: g.clone().map(|g| [g[0], g[1]]).collect(),
+        cov: g.clone().map(|g| [g[2], g[3], g[4]]).collect(),
+        colors: g.clone().map(|g| [g[5], g[6], g[7]]).collect(),
+        opacity: has_opacity.then(|| g.map(|g| g[8]).collect()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fit::{Fitter, Init, Loss};
+    use crate::synth::{random_scene, SceneSpec};
+
+    fn gpu() -> Option<Gpu> {
+        match Gpu::new() {
+            Ok(g) => Some(g),
+            Err(e) if std::env::var_os("GSI_REQUIRE_GPU").is_some() => panic!("{e}"),
+            Err(e) => {
+                eprintln!("skipped: {e}");
+                None
+            }
+        }
+    }
+
+    const LR: LearningRates = LearningRates {
+        position: 2e-4,
+        log_scale: 0.01,
+        rotation: 0.01,
+        color: 0.005,
+        opacity: 0.01,
+    };
+
+    fn target(w: u32, h: u32, blend: Blend) -> RgbImage {
+        let mut t = crate::render::render(&random_scene(7, SceneSpec::new(w, h, 120, blend)), w, h)
+            .unwrap();
+        t.data.iter_mut().for_each(|v| *v = v.clamp(0.0, 1.0));
+        t
+    }
+
+    /// Lists too small for a step: the step changes nothing, the next report asks for
+    /// more room, and the step after it, in the grown lists, moves the parameters.
+    #[test]
+    fn an_overflowing_step_is_skipped_and_the_lists_grow() {
+        let Some(gpu) = gpu() else { return };
+        let t = target(120, 90, Blend::Alpha);
+        let fitter = Fitter::new(&t, 150, Init::Adaptive, Blend::Alpha, Loss::L2, 1);
+        let mut adam = crate::fit::params::Adam::new(&fitter.params).state();
+        adam.step = 0;
+        let mut r = ResidentFit::new(&gpu, &t, Blend::Alpha, &fitter.params, &adam).unwrap();
+        let tiles = r.uniform.tiles_x * r.uniform.tiles_y;
+        r.lists = Lists::new(&gpu, &r.buffers, Blend::Alpha, tiles, 8).unwrap();
+        r.step(&LR, None, true).unwrap();
+        let (after, _) = r.download().unwrap();
+        assert_eq!(
+            after, fitter.params,
+            "an overflowing step changed the parameters"
+        );
+        let grown = r.grow_to.expect("the report asked for no more room");
+        assert!(grown > 8);
+        let report = r.step(&LR, None, true).unwrap().unwrap();
+        assert_eq!(r.lists.capacity, grown);
+        assert!(report.psnr.is_finite() && report.psnr > 10.0, "{report:?}");
+        let (after, _) = r.download().unwrap();
+        assert_ne!(after, fitter.params);
+    }
+
+    /// A 1×1 target, and Gaussians none of which is drawn (all off the image): finite
+    /// reports and parameters, nothing drawn moves but by Adam's zero gradient.
+    #[test]
+    fn tiny_targets_and_undrawn_gaussians() {
+        let Some(gpu) = gpu() else { return };
+        for blend in [Blend::Sum, Blend::Alpha] {
+            let t = target(1, 1, blend);
+            let fitter = Fitter::new(&t, 3, Init::Adaptive, blend, Loss::L2, 2);
+            let adam = crate::fit::params::Adam::new(&fitter.params).state();
+            let mut r = ResidentFit::new(&gpu, &t, blend, &fitter.params, &adam).unwrap();
+            for _ in 0..3 {
+                let report = r.step(&LR, None, true).unwrap().unwrap();
+                assert!(report.loss.is_finite(), "{report:?}");
+            }
+            let mut off = fitter.params.clone();
+            off.positions.iter_mut().for_each(|p| *p = [5.0, -3.0]);
+            let adam = crate::fit::params::Adam::new(&off).state();
+            let mut r = ResidentFit::new(&gpu, &t, blend, &off, &adam).unwrap();
+            let report = r.step(&LR, Some(crate::fit::default_bits(1, 1, blend)), true);
+            let report = report.unwrap().unwrap();
+            // Nothing drawn: the render is black.
+            let black = crate::fit::loss::psnr8(&[0.0; 3], &t.data, 1, 1);
+            assert_eq!(report.psnr, black);
+            let (after, _) = r.download().unwrap();
+            assert_eq!(after, off);
+        }
+    }
+}
