@@ -2,8 +2,9 @@
 // Shared by the kernels of the fitting loop (`src/gpu/fit.rs`); the host prepends it.
 //
 // A Gaussian's parameters are STRIDE floats, in the stored parameterization the CPU
-// fitter moves (`fit::params`): centre (u, v) in image units, ln σ1, ln σ2, θ, colour
-// (r, g, b), opacity. The Adam moments use the same layout.
+// fitter moves (`fit::params`): centre (u, v) in image units, ln σ1, ln σ2, θ (or, for
+// a decoded scene, whichever covariance parameters it stores), colour (r, g, b),
+// opacity. The Adam moments use the same layout.
 
 const STRIDE: u32 = 9u;
 // Invocations per workgroup of every one-dimensional kernel.
@@ -39,7 +40,9 @@ struct Fit {
     beta1: f32,
     beta2: f32,
     eps: f32,
-    _pad: u32,
+    // The parameters are a Cholesky factor (l11, l21, l22) rather than ln σ1, ln σ2, θ
+    // (a decoded scene's choice; the fitter always moves log-scale-rotation).
+    cholesky: u32,
 }
 
 @group(0) @binding(0) var<uniform> fit: Fit;

@@ -23,18 +23,18 @@
 //! Pruning, re-placement and colour solves stay on the CPU ([`crate::fit::Fitter`]): the
 //! fitter downloads the state before them and uploads it after, a few times per fit.
 
-use super::sort::{RadixSort, SortPlan};
-use super::{too_big, Gpu, Kernel};
+use super::forward::{capacity_for, entries_of, flatten, Forward, ForwardLists};
+use super::sort::RadixSort;
+use super::{Gpu, Kernel};
 use crate::fit::LearningRates;
 use crate::format::{BitDepths, Error, ErrorKind, Result};
-use crate::model::{Blend, GaussianSet};
-use crate::model::{CovParam, Scene};
-use crate::render::{project_scene, RgbImage, TILE};
+use crate::model::{Blend, CovParam, GaussianSet, Scene};
+use crate::render::{RgbImage, TILE};
 use wgpu::util::DeviceExt;
 
 /// Floats per Gaussian in the parameter and moment buffers (`STRIDE` of
 /// `fit_common.wgsl`): u, v, ln σ1, ln σ2, θ, r, g, b, opacity.
-const STRIDE: usize = 9;
+pub(crate) const STRIDE: usize = 9;
 /// Invocations per workgroup of the one-dimensional kernels (`GROUP`).
 pub(crate) const GROUP: u32 = 256;
 /// Floats per tile-list entry written by the backward passes (`SLOT`).
@@ -42,14 +42,14 @@ const SLOT: u64 = 9;
 
 /// The pipelines of the loop, built the first time a fit runs on a device.
 pub(crate) struct FitKernels {
-    range: Kernel,
-    project: Kernel,
-    scan: Kernel,
-    emit: Kernel,
-    tiles: Kernel,
+    pub range: Kernel,
+    pub project: Kernel,
+    pub scan: Kernel,
+    pub emit: Kernel,
+    pub tiles: Kernel,
+    pub sort: RadixSort,
     loss: Kernel,
     adam: Kernel,
-    sort: RadixSort,
 }
 
 impl FitKernels {
@@ -73,14 +73,14 @@ impl FitKernels {
 /// The uniform block `Fit` of `fit_common.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
-struct FitUniform {
-    width: u32,
-    height: u32,
-    tiles_x: u32,
-    tiles_y: u32,
-    count: u32,
-    capacity: u32,
-    blend: u32,
+pub(crate) struct FitUniform {
+    pub width: u32,
+    pub height: u32,
+    pub tiles_x: u32,
+    pub tiles_y: u32,
+    pub count: u32,
+    pub capacity: u32,
+    pub blend: u32,
     has_opacity: u32,
     qat: u32,
     bits: [u32; 4],
@@ -90,7 +90,38 @@ struct FitUniform {
     beta1: f32,
     beta2: f32,
     eps: f32,
-    _pad: u32,
+    pub cholesky: u32,
+}
+
+impl FitUniform {
+    /// `count` Gaussians drawn at `width × height`; no step taken yet.
+    pub(crate) fn new(
+        width: u32,
+        height: u32,
+        count: usize,
+        blend: Blend,
+        has_opacity: bool,
+    ) -> FitUniform {
+        FitUniform {
+            width,
+            height,
+            tiles_x: width.div_ceil(TILE),
+            tiles_y: height.div_ceil(TILE),
+            count: count as u32,
+            capacity: 0,
+            blend: u32::from(blend == Blend::Alpha),
+            has_opacity: u32::from(has_opacity),
+            qat: 0,
+            bits: [0; 4],
+            lr: [0.0; 5],
+            c1: 1.0,
+            c2: 1.0,
+            beta1: 0.0,
+            beta2: 0.0,
+            eps: 0.0,
+            cholesky: 0,
+        }
+    }
 }
 
 /// Adam's state as the CPU fitter keeps it ([`crate::fit::params::Adam`]).
@@ -114,36 +145,21 @@ pub struct StepReport {
     pub psnr: f64,
 }
 
-/// The buffers whose size is fixed by the image and the number of Gaussians.
-struct Buffers {
-    fit: wgpu::Buffer,
-    params: wgpu::Buffer,
+/// The fit's buffers beyond the forward half's.
+struct Backward {
     moments: wgpu::Buffer,
-    image: wgpu::Buffer,
-    dl: wgpu::Buffer,
-    gaussians: wgpu::Buffer,
-    boxes: wgpu::Buffer,
-    first_entry: wgpu::Buffer,
-    /// `[0]`: tile-list entries of the last step (saturating).
-    entries: wgpu::Buffer,
-    offsets: wgpu::Buffer,
     loss_part: wgpu::Buffer,
     sse8_part: wgpu::Buffer,
-    render_params: wgpu::Buffer,
+    /// The loss gradient, per pixel.
+    dl: wgpu::Buffer,
     backward_params: wgpu::Buffer,
-    range: wgpu::BindGroup,
-    project: wgpu::BindGroup,
-    scan: wgpu::BindGroup,
     loss: wgpu::BindGroup,
+    pixel_groups: (u32, u32),
 }
 
-/// The buffers sized by the number of tile-list entries, and what binds them.
+/// The tile lists, and the fit's buffers sized by them.
 struct Lists {
-    capacity: u32,
-    plan: SortPlan,
-    emit: wgpu::BindGroup,
-    tiles: wgpu::BindGroup,
-    render: wgpu::BindGroup,
+    forward: ForwardLists,
     backward: wgpu::BindGroup,
     adam: wgpu::BindGroup,
 }
@@ -156,13 +172,11 @@ pub struct ResidentFit<'g> {
     count: usize,
     has_opacity: bool,
     adam_step: i32,
-    buffers: Buffers,
+    forward: Forward,
+    back: Backward,
     lists: Lists,
     /// Capacity the lists must grow to before the next step.
     grow_to: Option<u32>,
-    gaussian_groups: (u32, u32),
-    pixel_groups: (u32, u32),
-    tile_groups: (u32, u32),
 }
 
 impl<'g> ResidentFit<'g> {
@@ -190,40 +204,23 @@ impl<'g> ResidentFit<'g> {
                 "a GPU fit needs a consistent, non-empty Gaussian set and target",
             ));
         }
-        let tiles_x = w.div_ceil(TILE);
-        let tiles_y = h.div_ceil(TILE);
-        let n = count as u64;
-        let pixels = u64::from(w) * u64::from(h);
-        let gaussian_groups = gpu.groups(n)?;
-        let pixel_groups = gpu.groups(pixels)?;
-        let tile_groups = gpu.groups(u64::from(tiles_x * tiles_y) + 1)?;
-        for bytes in [pixels * 12, n * STRIDE as u64 * 8, n * 48] {
-            if bytes > gpu.max_binding {
-                return Err(too_big(&gpu.info, "this fit"));
-            }
-        }
         let has_opacity = params.opacity.is_some();
-        let uniform = FitUniform {
-            width: w,
-            height: h,
-            tiles_x,
-            tiles_y,
-            count: count as u32,
-            capacity: 0,
-            blend: u32::from(blend == Blend::Alpha),
-            has_opacity: u32::from(has_opacity),
-            qat: 0,
-            bits: [0; 4],
-            lr: [0.0; 5],
-            c1: 1.0,
-            c2: 1.0,
-            beta1: adam.beta1,
-            beta2: adam.beta2,
-            eps: adam.eps,
-            _pad: 0,
-        };
-        let buffers = Buffers::new(gpu, &uniform, target, params, adam, pixel_groups);
-        // Twice the entries of the starting set as the CPU projects it.
+        let mut uniform = FitUniform::new(w, h, count, blend, has_opacity);
+        uniform.beta1 = adam.beta1;
+        uniform.beta2 = adam.beta2;
+        uniform.eps = adam.eps;
+        // Every step clamps opacity to [0, 1]; the upload does the same, so the chain rule
+        // on the GPU never meets an opacity outside it.
+        let mut flat = flatten(params, 1.0);
+        for g in flat.chunks_exact_mut(STRIDE) {
+            g[8] = if g[8].is_finite() {
+                g[8].clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+        }
+        let forward = Forward::new(gpu, &uniform, &flat)?;
+        let back = Backward::new(gpu, &forward, &uniform, target, adam)?;
         let scene = Scene {
             width: w,
             height: h,
@@ -231,20 +228,8 @@ impl<'g> ResidentFit<'g> {
             cov_param: CovParam::LogScaleRotation,
             gaussians: params.clone(),
         };
-        let entries: u64 = project_scene(&scene, w, h)
-            .iter()
-            .map(|g| {
-                let b = g.bbox;
-                u64::from(b.x1 / TILE - b.x0 / TILE + 1) * u64::from(b.y1 / TILE - b.y0 / TILE + 1)
-            })
-            .sum();
-        let lists = Lists::new(
-            gpu,
-            &buffers,
-            blend,
-            tiles_x * tiles_y,
-            capacity_for(entries),
-        )?;
+        let capacity = capacity_for(entries_of(&scene, w, h));
+        let lists = Lists::new(gpu, &forward, &back, blend, capacity)?;
         Ok(ResidentFit {
             gpu,
             uniform,
@@ -252,12 +237,10 @@ impl<'g> ResidentFit<'g> {
             count,
             has_opacity,
             adam_step: adam.step,
-            buffers,
+            forward,
+            back,
             lists,
             grow_to: None,
-            gaussian_groups,
-            pixel_groups,
-            tile_groups,
         })
     }
 
@@ -271,13 +254,13 @@ impl<'g> ResidentFit<'g> {
         qat: Option<BitDepths>,
         measure: bool,
     ) -> Result<Option<StepReport>> {
+        let gpu = self.gpu;
         if let Some(capacity) = self.grow_to.take() {
-            let tiles = self.uniform.tiles_x * self.uniform.tiles_y;
-            self.lists = Lists::new(self.gpu, &self.buffers, self.blend, tiles, capacity)?;
+            self.lists = Lists::new(gpu, &self.forward, &self.back, self.blend, capacity)?;
         }
         self.adam_step += 1;
         let u = &mut self.uniform;
-        u.capacity = self.lists.capacity;
+        u.capacity = self.lists.forward.capacity;
         u.c1 = 1.0 - u.beta1.powi(self.adam_step);
         u.c2 = 1.0 - u.beta2.powi(self.adam_step);
         u.lr = [lr.position, lr.log_scale, lr.rotation, lr.color, lr.opacity];
@@ -285,45 +268,30 @@ impl<'g> ResidentFit<'g> {
         if let Some(b) = qat {
             u.bits = [b.position, b.covariance, b.color, b.opacity].map(u32::from);
         }
-        let gpu = self.gpu;
         gpu.queue
-            .write_buffer(&self.buffers.fit, 0, bytemuck::bytes_of(&self.uniform));
+            .write_buffer(&self.forward.fit, 0, bytemuck::bytes_of(&self.uniform));
         let k = gpu.fit_kernels();
-        let (b, l) = (&self.buffers, &self.lists);
-        let tiles = (self.uniform.tiles_x, self.uniform.tiles_y);
+        let (f, b, l) = (&self.forward, &self.back, &self.lists);
         let mut enc = gpu
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        f.record_binning(gpu, &l.forward, &mut enc, qat.is_some());
         {
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
-            if qat.is_some() {
-                k.range.dispatch(&mut pass, &b.range, (1, 1));
-            }
-            k.project
-                .dispatch(&mut pass, &b.project, self.gaussian_groups);
-            k.scan.dispatch(&mut pass, &b.scan, (1, 1));
-            k.emit.dispatch(&mut pass, &l.emit, self.gaussian_groups);
-        }
-        l.plan.record(&k.sort, &mut enc);
-        {
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
-            k.tiles.dispatch(&mut pass, &l.tiles, self.tile_groups);
-            gpu.render.dispatch(&mut pass, &l.render, tiles);
-            k.loss.dispatch(&mut pass, &b.loss, self.pixel_groups);
-            let backward = match self.blend {
-                Blend::Sum => &gpu.backward_sum,
-                Blend::Alpha => &gpu.backward_alpha,
-            };
-            backward.dispatch(&mut pass, &l.backward, tiles);
-            k.adam.dispatch(&mut pass, &l.adam, self.gaussian_groups);
+            f.record_render(gpu, &l.forward, &mut pass);
+            k.loss.dispatch(&mut pass, &b.loss, b.pixel_groups);
+            let tiles = (self.uniform.tiles_x, self.uniform.tiles_y);
+            gpu.backward_kernel(self.blend)
+                .dispatch(&mut pass, &l.backward, tiles);
+            k.adam.dispatch(&mut pass, &l.adam, f.gaussian_groups);
         }
         if !measure {
             gpu.queue.submit([enc.finish()]);
             return Ok(None);
         }
         let [loss_part, sse8_part, entries] =
-            gpu.read_back(enc, [&b.loss_part, &b.sse8_part, &b.entries])?;
-        let entries = u32_at(&entries, 0);
+            gpu.read_back(enc, [&b.loss_part, &b.sse8_part, &f.entries])?;
+        let entries = bytemuck::cast_slice::<u8, u32>(&entries)[0];
         let loss: f64 = bytemuck::cast_slice::<u8, f32>(&loss_part)
             .iter()
             .map(|&x| f64::from(x))
@@ -333,7 +301,7 @@ impl<'g> ResidentFit<'g> {
             .map(|&x| u64::from(x))
             .sum();
         let values = u64::from(self.uniform.width) * u64::from(self.uniform.height) * 3;
-        if u64::from(entries) * 4 > u64::from(self.lists.capacity) * 3 {
+        if u64::from(entries) * 4 > u64::from(self.lists.forward.capacity) * 3 {
             self.grow_to = Some(capacity_for(u64::from(entries)));
         }
         Ok(Some(StepReport {
@@ -351,7 +319,7 @@ impl<'g> ResidentFit<'g> {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
         let [params, moments] = self
             .gpu
-            .read_back(enc, [&self.buffers.params, &self.buffers.moments])?;
+            .read_back(enc, [&self.forward.params, &self.back.moments])?;
         let params: &[f32] = bytemuck::cast_slice(&params);
         let moments: &[f32] = bytemuck::cast_slice(&moments);
         let n = self.count * STRIDE;
@@ -370,197 +338,91 @@ impl<'g> ResidentFit<'g> {
     }
 }
 
-impl Buffers {
+impl Backward {
     fn new(
         gpu: &Gpu,
+        f: &Forward,
         uniform: &FitUniform,
         target: &RgbImage,
-        params: &GaussianSet,
         adam: &AdamState,
-        pixel_groups: (u32, u32),
-    ) -> Buffers {
+    ) -> Result<Backward> {
         let device = &gpu.device;
-        let kernels = gpu.fit_kernels();
-        let storage = wgpu::BufferUsages::STORAGE
-            | wgpu::BufferUsages::COPY_SRC
-            | wgpu::BufferUsages::COPY_DST;
-        let init = |contents: &[u8]| {
-            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: None,
-                contents,
-                usage: storage,
-            })
-        };
-        let zeroed = |bytes: u64| gpu.zeroed(bytes);
-        let uniform_of = |contents: &[u8]| {
-            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: None,
-                contents,
-                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-            })
-        };
-        let n = params.len() as u64;
         let pixels = u64::from(uniform.width) * u64::from(uniform.height);
-        let tiles = u64::from(uniform.tiles_x) * u64::from(uniform.tiles_y);
+        let pixel_groups = gpu.groups(pixels)?;
         let loss_groups = u64::from(pixel_groups.0) * u64::from(pixel_groups.1);
-        // Every step clamps opacity to [0, 1]; the upload does the same, so the chain rule
-        // on the GPU never meets an opacity outside it.
-        let mut flat = flatten(params, 1.0);
-        for g in flat.chunks_exact_mut(STRIDE) {
-            g[8] = if g[8].is_finite() {
-                g[8].clamp(0.0, 1.0)
-            } else {
-                0.0
-            };
-        }
         let mut moments = flatten(&adam.m, 0.0);
         moments.extend(flatten(&adam.v, 0.0));
-        let fit = uniform_of(bytemuck::bytes_of(uniform));
-        let params = init(bytemuck::cast_slice(&flat));
-        let moments = init(bytemuck::cast_slice(&moments));
-        let target = init(bytemuck::cast_slice(&target.data));
-        let image = zeroed(pixels * 12);
-        let dl = zeroed(pixels * 12);
-        let ranges = zeroed(STRIDE as u64 * 8);
-        let gaussians = zeroed(n * 48);
-        let boxes = zeroed(n * 16);
-        let touched = zeroed(n * 4);
-        let first_entry = zeroed(n * 4);
-        let entries = zeroed(4);
-        let offsets = zeroed((tiles + 1) * 4);
-        let loss_part = zeroed(loss_groups * 4);
-        let sse8_part = zeroed(loss_groups * 4);
-        // The render and backward kernels' own uniform blocks: the whole image, one band.
-        let (w, h) = (uniform.width, uniform.height);
-        let render_params = uniform_of(bytemuck::cast_slice(&[
-            w,
-            h,
+        let storage = |contents: &[u8]| {
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: None,
+                contents,
+                usage: wgpu::BufferUsages::STORAGE
+                    | wgpu::BufferUsages::COPY_SRC
+                    | wgpu::BufferUsages::COPY_DST,
+            })
+        };
+        let moments = storage(bytemuck::cast_slice(&moments));
+        let target = storage(bytemuck::cast_slice(&target.data));
+        let dl = gpu.zeroed(pixels * 12);
+        let loss_part = gpu.zeroed(loss_groups * 4);
+        let sse8_part = gpu.zeroed(loss_groups * 4);
+        let backward_params = gpu.uniform_buffer(bytemuck::cast_slice(&[
+            uniform.width,
+            uniform.height,
             uniform.tiles_x,
-            uniform.blend,
-            0,
-            h,
-            0,
-            0,
+            0u32,
         ]));
-        let backward_params = uniform_of(bytemuck::cast_slice(&[w, h, uniform.tiles_x, 0u32]));
-        Buffers {
-            range: kernels.range.bind(device, &[&fit, &params, &ranges]),
-            project: kernels.project.bind(
+        Ok(Backward {
+            loss: gpu.fit_kernels().loss.bind(
                 device,
-                &[&fit, &params, &ranges, &gaussians, &boxes, &touched],
+                &[&f.fit, &f.image, &target, &dl, &loss_part, &sse8_part],
             ),
-            scan: kernels
-                .scan
-                .bind(device, &[&fit, &touched, &first_entry, &entries]),
-            loss: kernels.loss.bind(
-                device,
-                &[&fit, &image, &target, &dl, &loss_part, &sse8_part],
-            ),
-            fit,
-            params,
             moments,
-            image,
-            dl,
-            gaussians,
-            boxes,
-            first_entry,
-            entries,
-            offsets,
             loss_part,
             sse8_part,
-            render_params,
+            dl,
             backward_params,
-        }
-    }
-}
-
-impl Lists {
-    fn new(gpu: &Gpu, b: &Buffers, blend: Blend, tiles: u32, capacity: u32) -> Result<Lists> {
-        if u64::from(capacity) * SLOT * 4 > gpu.max_binding {
-            return Err(too_big(&gpu.info, "the tile lists of this fit"));
-        }
-        let device = &gpu.device;
-        let k = gpu.fit_kernels();
-        let keys = gpu.zeroed(u64::from(capacity) * 4);
-        let values = gpu.zeroed(u64::from(capacity) * 4);
-        let slots = gpu.zeroed(u64::from(capacity) * SLOT * 4);
-        let key_bits = (32 - tiles.saturating_sub(1).leading_zeros()).max(1);
-        let plan = SortPlan::new(
-            device, &k.sort, &keys, &values, &b.entries, capacity, key_bits,
-        )?;
-        let backward = match blend {
-            Blend::Sum => &gpu.backward_sum,
-            Blend::Alpha => &gpu.backward_alpha,
-        };
-        Ok(Lists {
-            capacity,
-            emit: k
-                .emit
-                .bind(device, &[&b.fit, &b.boxes, &b.first_entry, &keys, &values]),
-            tiles: k
-                .tiles
-                .bind(device, &[&b.fit, &keys, &b.entries, &b.offsets]),
-            render: gpu.render.bind(
-                device,
-                &[
-                    &b.render_params,
-                    &b.gaussians,
-                    &b.boxes,
-                    &b.offsets,
-                    &values,
-                    &b.image,
-                ],
-            ),
-            backward: backward.bind(
-                device,
-                &[
-                    &b.backward_params,
-                    &b.gaussians,
-                    &b.boxes,
-                    &b.offsets,
-                    &values,
-                    &b.dl,
-                    &slots,
-                ],
-            ),
-            adam: k.adam.bind(
-                device,
-                &[
-                    &b.fit,
-                    &b.gaussians,
-                    &b.boxes,
-                    &b.offsets,
-                    &values,
-                    &slots,
-                    &b.entries,
-                    &b.params,
-                    &b.moments,
-                ],
-            ),
-            plan,
+            pixel_groups,
         })
     }
 }
 
-/// List capacity for a set that covers `entries` tile entries now: room to double.
-fn capacity_for(entries: u64) -> u32 {
-    (entries.saturating_mul(2)).clamp(4096, u64::from(u32::MAX / 64)) as u32
-}
-
-fn u32_at(bytes: &[u8], i: usize) -> u32 {
-    bytemuck::cast_slice::<u8, u32>(bytes)[i]
-}
-
-/// `STRIDE` floats per Gaussian; `opacity` stands in where the set has none.
-fn flatten(set: &GaussianSet, opacity: f32) -> Vec<f32> {
-    let mut out = Vec::with_capacity(set.len() * STRIDE);
-    for i in 0..set.len() {
-        out.extend_from_slice(&set.positions[i]);
-        out.extend_from_slice(&set.cov[i]);
-        out.extend_from_slice(&set.colors[i]);
-        out.push(set.opacity.as_ref().map_or(opacity, |o| o[i]));
+impl Lists {
+    fn new(gpu: &Gpu, f: &Forward, b: &Backward, blend: Blend, capacity: u32) -> Result<Lists> {
+        let forward = ForwardLists::new(gpu, f, capacity, SLOT * 4)?;
+        let device = &gpu.device;
+        let slots = gpu.zeroed(u64::from(capacity) * SLOT * 4);
+        let values = &forward.values;
+        Ok(Lists {
+            backward: gpu.backward_kernel(blend).bind(
+                device,
+                &[
+                    &b.backward_params,
+                    &f.gaussians,
+                    &f.boxes,
+                    &f.offsets,
+                    values,
+                    &b.dl,
+                    &slots,
+                ],
+            ),
+            adam: gpu.fit_kernels().adam.bind(
+                device,
+                &[
+                    &f.fit,
+                    &f.gaussians,
+                    &f.boxes,
+                    &f.offsets,
+                    values,
+                    &slots,
+                    &f.entries,
+                    &f.params,
+                    &b.moments,
+                ],
+            ),
+            forward,
+        })
     }
-    out
 }
 
 fn unflatten(flat: &[f32], has_opacity: bool) -> GaussianSet {
@@ -615,8 +477,7 @@ mod tests {
         let mut adam = crate::fit::params::Adam::new(&fitter.params).state();
         adam.step = 0;
         let mut r = ResidentFit::new(&gpu, &t, Blend::Alpha, &fitter.params, &adam).unwrap();
-        let tiles = r.uniform.tiles_x * r.uniform.tiles_y;
-        r.lists = Lists::new(&gpu, &r.buffers, Blend::Alpha, tiles, 8).unwrap();
+        r.lists = Lists::new(&gpu, &r.forward, &r.back, Blend::Alpha, 8).unwrap();
         r.step(&LR, None, true).unwrap();
         let (after, _) = r.download().unwrap();
         assert_eq!(
@@ -626,7 +487,7 @@ mod tests {
         let grown = r.grow_to.expect("the report asked for no more room");
         assert!(grown > 8);
         let report = r.step(&LR, None, true).unwrap().unwrap();
-        assert_eq!(r.lists.capacity, grown);
+        assert_eq!(r.lists.forward.capacity, grown);
         assert!(report.psnr.is_finite() && report.psnr > 10.0, "{report:?}");
         let (after, _) = r.download().unwrap();
         assert_ne!(after, fitter.params);

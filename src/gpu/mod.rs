@@ -32,7 +32,7 @@ macro_rules! shader {
 /// The constants of the pixel contract (format-spec.md §6) and of the model, written as
 /// WGSL from the Rust constants themselves, so that no shader can drift from the CPU.
 fn contract() -> String {
-    use crate::model::{LN_SIGMA_MAX, LN_SIGMA_MIN};
+    use crate::model::{CHOLESKY_MAX, LN_SIGMA_MAX, LN_SIGMA_MIN};
     use crate::render::{
         ALPHA_MAX, ALPHA_MIN, COLOR_MAX, CORRELATION_MAX, EXTENT_SIGMAS, TRANSMITTANCE_MIN,
         VAR_MAX, VAR_MIN,
@@ -48,6 +48,7 @@ fn contract() -> String {
         ("COLOR_MAX", COLOR_MAX),
         ("LN_SIGMA_MIN", LN_SIGMA_MIN),
         ("LN_SIGMA_MAX", LN_SIGMA_MAX),
+        ("CHOLESKY_MAX", CHOLESKY_MAX),
     ];
     let mut out = format!("const TILE: u32 = {TILE}u;\n");
     for (name, value) in floats {
@@ -66,7 +67,10 @@ pub(crate) fn with_contract(parts: &[&str]) -> String {
 }
 
 pub mod fit;
+mod forward;
 mod sort;
+
+pub use forward::GpuScene;
 
 /// Why no GPU can be used.
 #[derive(Debug)]
@@ -312,7 +316,7 @@ impl Gpu {
             _pad: [0; 2],
         };
         let inputs = [
-            self.uniform(bytemuck::bytes_of(&params)),
+            self.uniform_buffer(bytemuck::bytes_of(&params)),
             g_buf.clone(),
             b_buf.clone(),
             self.storage(bytemuck::cast_slice(&offsets)),
@@ -353,18 +357,19 @@ impl Gpu {
         let (gaussians, boxes) = upload_layout(proj);
         let params = [width, height, tiles_x, 0u32];
         let inputs = [
-            self.uniform(bytemuck::cast_slice(&params)),
+            self.uniform_buffer(bytemuck::cast_slice(&params)),
             self.storage(bytemuck::cast_slice(&gaussians)),
             self.storage(bytemuck::cast_slice(&boxes)),
             self.storage(bytemuck::cast_slice(&offsets)),
             self.storage(bytemuck::cast_slice(&indices)),
             self.storage(bytemuck::cast_slice(dl_dimage)),
         ];
-        let kernel = match blend {
-            Blend::Sum => &self.backward_sum,
-            Blend::Alpha => &self.backward_alpha,
-        };
-        self.run(kernel, &inputs, (tiles_x, tiles_y), &mut slots)?;
+        self.run(
+            self.backward_kernel(blend),
+            &inputs,
+            (tiles_x, tiles_y),
+            &mut slots,
+        )?;
         let mut out = vec![[0.0f32; 9]; proj.len()];
         for (k, slot) in indices.iter().zip(slots.chunks_exact(9)) {
             for (o, s) in out[*k as usize].iter_mut().zip(slot) {
@@ -372,15 +377,6 @@ impl Gpu {
             }
         }
         Ok(out)
-    }
-
-    fn uniform(&self, bytes: &[u8]) -> wgpu::Buffer {
-        self.device
-            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: None,
-                contents: bytes,
-                usage: wgpu::BufferUsages::UNIFORM,
-            })
     }
 
     /// Bind `inputs` then an output buffer the size of `out`, dispatch `groups`
@@ -478,6 +474,24 @@ impl Gpu {
             return Err(too_big(&self.info, "this dispatch"));
         }
         Ok((g.min(max) as u32, y as u32))
+    }
+
+    /// A uniform block the host may rewrite between submissions.
+    pub(crate) fn uniform_buffer(&self, bytes: &[u8]) -> wgpu::Buffer {
+        self.device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: None,
+                contents: bytes,
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            })
+    }
+
+    /// The backward pass of `blend`.
+    pub(crate) fn backward_kernel(&self, blend: Blend) -> &Kernel {
+        match blend {
+            Blend::Sum => &self.backward_sum,
+            Blend::Alpha => &self.backward_alpha,
+        }
     }
 
     /// The fitting loop's pipelines, built on first use.

@@ -1,0 +1,351 @@
+//! The forward half of the resident pipeline: Gaussians uploaded once, then projected,
+//! binned and rendered on the GPU with nothing crossing the bus. The fitting loop
+//! ([`super::fit`]) runs it at every step; [`GpuScene`] runs it to draw a decoded scene
+//! again and again (what a viewer, or a frame-rate measurement, does).
+//!
+//! Kernels: `fit_range` (quantization-aware steps only), `fit_project`, `fit_scan`,
+//! `fit_emit`, the radix sort ([`super::sort`]), `fit_tiles`, then `render`.
+
+use super::fit::{FitUniform, STRIDE};
+use super::sort::SortPlan;
+use super::{too_big, Gpu};
+use crate::format::{Error, ErrorKind, Limits, Result};
+use crate::model::{CovParam, GaussianSet, Scene};
+use crate::render::{project_scene, RgbImage, TILE};
+use wgpu::util::DeviceExt;
+
+/// Buffers and bindings of the forward half whose size the image and the number of
+/// Gaussians fix.
+pub(crate) struct Forward {
+    pub fit: wgpu::Buffer,
+    pub params: wgpu::Buffer,
+    pub image: wgpu::Buffer,
+    pub gaussians: wgpu::Buffer,
+    pub boxes: wgpu::Buffer,
+    first_entry: wgpu::Buffer,
+    /// `[0]`: tile-list entries of the last frame (saturating).
+    pub entries: wgpu::Buffer,
+    pub offsets: wgpu::Buffer,
+    range: wgpu::BindGroup,
+    project: wgpu::BindGroup,
+    scan: wgpu::BindGroup,
+    render_params: wgpu::Buffer,
+    pub gaussian_groups: (u32, u32),
+    tile_groups: (u32, u32),
+    tiles: (u32, u32),
+}
+
+/// The buffers sized by the number of tile-list entries, and what binds them.
+pub(crate) struct ForwardLists {
+    pub capacity: u32,
+    /// Gaussian of each sorted entry: tile t lists `values[offsets[t]..offsets[t + 1]]`.
+    pub values: wgpu::Buffer,
+    plan: SortPlan,
+    emit: wgpu::BindGroup,
+    tiles: wgpu::BindGroup,
+    render: wgpu::BindGroup,
+}
+
+impl Forward {
+    /// Upload `params` (`STRIDE` floats per Gaussian) and make room for a frame of the
+    /// size `uniform` gives. Fails when a buffer exceeds what the adapter can bind.
+    pub(crate) fn new(gpu: &Gpu, uniform: &FitUniform, params: &[f32]) -> Result<Forward> {
+        let (w, h) = (uniform.width, uniform.height);
+        let n = u64::from(uniform.count);
+        let pixels = u64::from(w) * u64::from(h);
+        let tiles = u64::from(uniform.tiles_x) * u64::from(uniform.tiles_y);
+        for bytes in [pixels * 12, n * STRIDE as u64 * 8, n * 48] {
+            if bytes > gpu.max_binding {
+                return Err(too_big(&gpu.info, "this set of Gaussians at this size"));
+            }
+        }
+        let device = &gpu.device;
+        let k = gpu.fit_kernels();
+        let fit = gpu.uniform_buffer(bytemuck::bytes_of(uniform));
+        let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: None,
+            contents: bytemuck::cast_slice(params),
+            usage: wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_SRC
+                | wgpu::BufferUsages::COPY_DST,
+        });
+        let ranges = gpu.zeroed(STRIDE as u64 * 8);
+        let gaussians = gpu.zeroed(n * 48);
+        let boxes = gpu.zeroed(n * 16);
+        let touched = gpu.zeroed(n * 4);
+        let first_entry = gpu.zeroed(n * 4);
+        let entries = gpu.zeroed(4);
+        // Render's own uniform block: the whole image, one band.
+        let render_params = gpu.uniform_buffer(bytemuck::cast_slice(&[
+            w,
+            h,
+            uniform.tiles_x,
+            uniform.blend,
+            0,
+            h,
+            0,
+            0,
+        ]));
+        Ok(Forward {
+            range: k.range.bind(device, &[&fit, &params, &ranges]),
+            project: k.project.bind(
+                device,
+                &[&fit, &params, &ranges, &gaussians, &boxes, &touched],
+            ),
+            scan: k
+                .scan
+                .bind(device, &[&fit, &touched, &first_entry, &entries]),
+            image: gpu.zeroed(pixels * 12),
+            offsets: gpu.zeroed((tiles + 1) * 4),
+            gaussian_groups: gpu.groups(n)?,
+            tile_groups: gpu.groups(tiles + 1)?,
+            tiles: (uniform.tiles_x, uniform.tiles_y),
+            fit,
+            params,
+            gaussians,
+            boxes,
+            first_entry,
+            entries,
+            render_params,
+        })
+    }
+
+    /// Record projection and binning: a compute pass, then the sort's.
+    pub(crate) fn record_binning(
+        &self,
+        gpu: &Gpu,
+        lists: &ForwardLists,
+        enc: &mut wgpu::CommandEncoder,
+        quantized: bool,
+    ) {
+        let k = gpu.fit_kernels();
+        {
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
+            if quantized {
+                k.range.dispatch(&mut pass, &self.range, (1, 1));
+            }
+            k.project
+                .dispatch(&mut pass, &self.project, self.gaussian_groups);
+            k.scan.dispatch(&mut pass, &self.scan, (1, 1));
+            k.emit
+                .dispatch(&mut pass, &lists.emit, self.gaussian_groups);
+        }
+        lists.plan.record(&k.sort, enc);
+    }
+
+    /// Record the tile ranges and the render into `pass` (after [`Forward::record_binning`]).
+    pub(crate) fn record_render(
+        &self,
+        gpu: &Gpu,
+        lists: &ForwardLists,
+        pass: &mut wgpu::ComputePass<'_>,
+    ) {
+        gpu.fit_kernels()
+            .tiles
+            .dispatch(pass, &lists.tiles, self.tile_groups);
+        gpu.render.dispatch(pass, &lists.render, self.tiles);
+    }
+}
+
+impl ForwardLists {
+    /// Lists for `capacity` entries; `per_entry` more bytes of the caller's per entry
+    /// count against the adapter's limit.
+    pub(crate) fn new(
+        gpu: &Gpu,
+        f: &Forward,
+        capacity: u32,
+        per_entry: u64,
+    ) -> Result<ForwardLists> {
+        if u64::from(capacity) * per_entry.max(4) > gpu.max_binding {
+            return Err(too_big(
+                &gpu.info,
+                "the tile lists of this set of Gaussians",
+            ));
+        }
+        let device = &gpu.device;
+        let k = gpu.fit_kernels();
+        let keys = gpu.zeroed(u64::from(capacity) * 4);
+        let values = gpu.zeroed(u64::from(capacity) * 4);
+        let tiles = f.tiles.0 * f.tiles.1;
+        let key_bits = (32 - tiles.saturating_sub(1).leading_zeros()).max(1);
+        let plan = SortPlan::new(
+            device, &k.sort, &keys, &values, &f.entries, capacity, key_bits,
+        )?;
+        Ok(ForwardLists {
+            capacity,
+            emit: k
+                .emit
+                .bind(device, &[&f.fit, &f.boxes, &f.first_entry, &keys, &values]),
+            tiles: k
+                .tiles
+                .bind(device, &[&f.fit, &keys, &f.entries, &f.offsets]),
+            render: gpu.render.bind(
+                device,
+                &[
+                    &f.render_params,
+                    &f.gaussians,
+                    &f.boxes,
+                    &f.offsets,
+                    &values,
+                    &f.image,
+                ],
+            ),
+            values,
+            plan,
+        })
+    }
+}
+
+/// List capacity for a set that covers `entries` tile entries now: room to double.
+pub(crate) fn capacity_for(entries: u64) -> u32 {
+    (entries.saturating_mul(2)).clamp(4096, u64::from(u32::MAX / 64)) as u32
+}
+
+/// Tile-list entries of `scene` at `width × height`, as the CPU projects it.
+pub(crate) fn entries_of(scene: &Scene, width: u32, height: u32) -> u64 {
+    project_scene(scene, width, height)
+        .iter()
+        .map(|g| {
+            let b = g.bbox;
+            u64::from(b.x1 / TILE - b.x0 / TILE + 1) * u64::from(b.y1 / TILE - b.y0 / TILE + 1)
+        })
+        .sum()
+}
+
+/// `STRIDE` floats per Gaussian; `opacity` stands in where the set has none.
+pub(crate) fn flatten(set: &GaussianSet, opacity: f32) -> Vec<f32> {
+    let mut out = Vec::with_capacity(set.len() * STRIDE);
+    for i in 0..set.len() {
+        out.extend_from_slice(&set.positions[i]);
+        out.extend_from_slice(&set.cov[i]);
+        out.extend_from_slice(&set.colors[i]);
+        out.push(set.opacity.as_ref().map_or(opacity, |o| o[i]));
+    }
+    out
+}
+
+/// A decoded scene resident on the GPU, drawn at a fixed size as often as wanted: the
+/// whole forward pipeline runs per frame (projection, binning, render), only the image
+/// comes back, and only when asked.
+///
+/// Its pixels are those of [`Gpu::render`] but for the projection, which here runs in
+/// the GPU's `sin`, `cos` and `exp`: a pixel on the edge of a Gaussian's box may fall on
+/// either side of it. Decoding (`gsi decode`) keeps [`Gpu::render`], whose projection is
+/// the CPU's own.
+pub struct GpuScene<'g> {
+    gpu: &'g Gpu,
+    width: u32,
+    height: u32,
+    forward: Forward,
+    lists: ForwardLists,
+}
+
+impl<'g> GpuScene<'g> {
+    /// Upload `scene` for drawing at `width × height`, and draw it once to check that
+    /// its tile lists fit.
+    pub fn new(gpu: &'g Gpu, scene: &Scene, width: u32, height: u32) -> Result<GpuScene<'g>> {
+        Limits::default().check_output(width, height)?;
+        let g = &scene.gaussians;
+        if !g.is_consistent() || g.is_empty() || g.len() > u32::MAX as usize / 64 {
+            return Err(Error::new(
+                ErrorKind::InvalidValue,
+                "a GPU scene needs a consistent, non-empty Gaussian set",
+            ));
+        }
+        let mut uniform = FitUniform::new(width, height, g.len(), scene.blend, g.opacity.is_some());
+        uniform.cholesky = u32::from(scene.cov_param == CovParam::Cholesky);
+        // Non-finite parameters read as the CPU reads them (`CovParam::covariance`
+        // and `render::project`): 0, and a non-finite opacity hides its Gaussian.
+        let params: Vec<f32> = flatten(g, 1.0)
+            .chunks_exact(STRIDE)
+            .flat_map(|p| {
+                let mut p: [f32; STRIDE] = p.try_into().expect("STRIDE floats");
+                for x in &mut p[2..5] {
+                    *x = if x.is_finite() { *x } else { 0.0 };
+                }
+                if !p[8].is_finite() {
+                    p[8] = 0.0;
+                }
+                if !(p[0].is_finite() && p[1].is_finite()) {
+                    p[0] = -1e9;
+                }
+                p
+            })
+            .collect();
+        let capacity = capacity_for(entries_of(scene, width, height));
+        let forward = Forward::new(gpu, &uniform, &params)?;
+        let s = GpuScene::with_lists(gpu, forward, uniform, capacity)?;
+        // The CPU's count, doubled, leaves room for the GPU's own rounding; check it.
+        let [entries] = gpu.read_back(s.frame(), [&s.forward.entries])?;
+        let entries = u64::from(bytemuck::cast_slice::<u8, u32>(&entries)[0]);
+        if entries <= u64::from(capacity) {
+            return Ok(s);
+        }
+        let capacity = capacity_for(entries);
+        if u64::from(capacity) < entries {
+            return Err(too_big(&gpu.info, "the tile lists of this scene"));
+        }
+        GpuScene::with_lists(gpu, s.forward, uniform, capacity)
+    }
+
+    fn with_lists(
+        gpu: &'g Gpu,
+        forward: Forward,
+        mut uniform: FitUniform,
+        capacity: u32,
+    ) -> Result<GpuScene<'g>> {
+        uniform.capacity = capacity;
+        gpu.queue
+            .write_buffer(&forward.fit, 0, bytemuck::bytes_of(&uniform));
+        let lists = ForwardLists::new(gpu, &forward, capacity, 4)?;
+        Ok(GpuScene {
+            gpu,
+            width: uniform.width,
+            height: uniform.height,
+            forward,
+            lists,
+        })
+    }
+
+    /// A frame's commands.
+    fn frame(&self) -> wgpu::CommandEncoder {
+        let mut enc = self
+            .gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        self.forward
+            .record_binning(self.gpu, &self.lists, &mut enc, false);
+        {
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
+            self.forward.record_render(self.gpu, &self.lists, &mut pass);
+        }
+        enc
+    }
+
+    /// Queue `frames` draws without waiting for them.
+    pub fn draw(&self, frames: u32) {
+        for _ in 0..frames {
+            self.gpu.queue.submit([self.frame().finish()]);
+        }
+    }
+
+    /// Wait until every queued draw has finished.
+    pub fn wait(&self) -> Result<()> {
+        self.gpu
+            .device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map(|_| ())
+            .map_err(|e| Error::new(ErrorKind::Io, format!("GPU: {e}")))
+    }
+
+    /// Draw once more and read the image back.
+    pub fn image(&self) -> Result<RgbImage> {
+        let [bytes] = self.gpu.read_back(self.frame(), [&self.forward.image])?;
+        let n = self.width as usize * self.height as usize * 3;
+        Ok(RgbImage {
+            width: self.width,
+            height: self.height,
+            data: bytemuck::cast_slice::<u8, f32>(&bytes)[..n].to_vec(),
+        })
+    }
+}
