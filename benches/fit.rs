@@ -1,4 +1,6 @@
-//! One fitting iteration (forward, loss, backward, Adam) at 768×512, and the pieces of it.
+//! One fitting iteration (forward, loss, backward, Adam) at 768×512, and the pieces of it;
+//! with a hardware GPU (or `GSI_BENCH_ANY_GPU=1`, which takes a software one too), the
+//! same iteration resident on the GPU (`gpu_fit_iteration`).
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use gsi::fit::{raster, Fitter, Init, Loss, Target};
@@ -53,5 +55,46 @@ fn fit_iteration(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, fit_iteration);
+/// Ten resident steps, the last one measured (so the time includes waiting for all ten
+/// and one progress read-back): a tenth of it is the cost of a step in a real fit, which
+/// reads progress every ten steps.
+#[cfg(feature = "gpu")]
+fn gpu_fit_iteration(c: &mut Criterion) {
+    let gpu = if std::env::var_os("GSI_BENCH_ANY_GPU").is_some() {
+        gsi::gpu::Gpu::new()
+    } else {
+        gsi::gpu::Gpu::new_hardware()
+    };
+    let gpu = match gpu {
+        Ok(g) => g,
+        Err(e) => {
+            eprintln!("gpu_fit_iteration skipped: {e}");
+            return;
+        }
+    };
+    eprintln!("adapter: {}", gpu.adapter());
+    let t = target();
+    let lr = gsi::fit::EncodeOptions::default().lr;
+    let mut group = c.benchmark_group("gpu_fit_iteration");
+    group.sample_size(10);
+    for blend in [Blend::Sum, Blend::Alpha] {
+        for n in [5000, 9000, 70_000] {
+            let mut f = Fitter::new(&t, n, Init::Adaptive, blend, Loss::L2, 0);
+            f.use_gpu(&gpu);
+            group.bench_function(format!("{}/l2/{}k/10-steps", blend.name(), n / 1000), |b| {
+                b.iter(|| {
+                    for k in 0..10 {
+                        black_box(f.step(&lr, None, k == 9));
+                    }
+                })
+            });
+        }
+    }
+    group.finish();
+}
+
+#[cfg(not(feature = "gpu"))]
+fn gpu_fit_iteration(_: &mut Criterion) {}
+
+criterion_group!(benches, fit_iteration, gpu_fit_iteration);
 criterion_main!(benches);

@@ -355,3 +355,71 @@ fn resident_steps_follow_the_cpu_steps() {
         assert!(rel < 1e-4, "{blend:?}: relative difference {rel}");
     }
 }
+
+/// Degenerate and non-finite parameters, read as the CPU reads them: a resident scene
+/// draws them without a non-finite value, and as the CPU does, both parameterizations and
+/// blend modes.
+#[test]
+fn a_resident_scene_survives_degenerate_gaussians() {
+    use gsi::model::{CovParam, GaussianSet, Scene};
+    let Some(gpu) = gpu() else { return };
+    let odd = [
+        0.0,
+        -0.0,
+        1e-30,
+        1e30,
+        -1e30,
+        f32::INFINITY,
+        f32::NAN,
+        0.5,
+        -3.0,
+    ];
+    let mut g = GaussianSet::default();
+    let mut k = 0usize;
+    for &a in &odd {
+        for &b in &odd {
+            let pick = |i: usize| odd[(k + i) % odd.len()];
+            g.positions.push([0.5 + 0.1 * (k % 5) as f32, pick(1)]);
+            g.cov.push([a, b, pick(2)]);
+            g.colors.push([pick(3), 0.5, pick(4)]);
+            k += 1;
+        }
+    }
+    // And well-behaved ones, so the image is not just black.
+    for i in 0..20 {
+        g.positions.push([0.05 * i as f32, 0.5]);
+        g.cov.push([-3.0, -3.5, 0.3]);
+        g.colors.push([0.8, 0.3, 0.1]);
+    }
+    for blend in [Blend::Sum, Blend::Alpha] {
+        for cov_param in [CovParam::LogScaleRotation, CovParam::Cholesky] {
+            let mut gaussians = g.clone();
+            if blend == Blend::Alpha {
+                gaussians.opacity = Some(
+                    (0..gaussians.len())
+                        .map(|i| odd[i % odd.len()].clamp(-1.0, 2.0))
+                        .collect(),
+                );
+                gaussians.opacity.as_mut().unwrap()[3] = f32::NAN;
+            }
+            let scene = Scene {
+                width: 40,
+                height: 30,
+                blend,
+                cov_param,
+                gaussians,
+            };
+            let cpu = gsi::render::render(&scene, 40, 30).unwrap();
+            let img = gsi::gpu::GpuScene::new(&gpu, &scene, 40, 30)
+                .unwrap()
+                .image()
+                .unwrap();
+            assert!(
+                img.data.iter().all(|x| x.is_finite()),
+                "{blend:?} {cov_param:?}"
+            );
+            let d = max_diff(&cpu, &img);
+            assert!(d <= 1, "{blend:?} {cov_param:?}: differs by {d}/255");
+        }
+    }
+}

@@ -254,14 +254,21 @@ impl<'g> GpuScene<'g> {
         }
         let mut uniform = FitUniform::new(width, height, g.len(), scene.blend, g.opacity.is_some());
         uniform.cholesky = u32::from(scene.cov_param == CovParam::Cholesky);
-        // Non-finite parameters read as the CPU reads them (`CovParam::covariance`
-        // and `render::project`): 0, and a non-finite opacity hides its Gaussian.
+        // Parameters read as the CPU reads them (`CovParam::covariance`, `render::project`):
+        // non-finite ones as 0, a non-finite centre or opacity as a Gaussian not drawn.
+        // An angle is brought into [-π, π] here, with the CPU's own `sin` and `cos`: a
+        // GPU's are only accurate near 0, and a file may hold any angle.
+        let rotation = scene.cov_param == CovParam::LogScaleRotation;
         let params: Vec<f32> = flatten(g, 1.0)
             .chunks_exact(STRIDE)
             .flat_map(|p| {
                 let mut p: [f32; STRIDE] = p.try_into().expect("STRIDE floats");
-                for x in &mut p[2..5] {
+                for x in &mut p[2..8] {
                     *x = if x.is_finite() { *x } else { 0.0 };
+                }
+                if rotation {
+                    let (sin, cos) = p[4].sin_cos();
+                    p[4] = sin.atan2(cos);
                 }
                 if !p[8].is_finite() {
                     p[8] = 0.0;
