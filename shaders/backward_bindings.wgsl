@@ -2,8 +2,8 @@
 // Inputs and output shared by both backward passes (`backward_sum.wgsl`,
 // `backward_alpha.wgsl`); the host prepends this file to each.
 
-// Gradient slot per tile-list entry: d mean (2), d conic (3), d opacity, d colour (3).
-const SLOT: u32 = 9u;
+// SLOT, the floats of a tile-list entry's gradient (d mean (2), d conic (3), d opacity,
+// d colour (3)), comes with the contract constants.
 
 struct Params {
     width: u32,
@@ -13,7 +13,8 @@ struct Params {
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
-// Three vec4 per Gaussian: (mx, my, A, B), (C, opacity, r, g), (b, -, -, -).
+// Three vec4 per Gaussian: (mx, my, A, B), (C, opacity, r, g), (b, …); the lanes after
+// b are not read here.
 @group(0) @binding(1) var<storage, read> gaussians: array<vec4<f32>>;
 // Pixel box per Gaussian: (x0, y0, x1, y1), inclusive.
 @group(0) @binding(2) var<storage, read> boxes: array<vec4<u32>>;

@@ -25,8 +25,6 @@
 // Adam's first moments for all Gaussians, then the second moments.
 @group(0) @binding(8) var<storage, read_write> moments: array<f32>;
 
-// Gradient slot per list entry: d mean (2), d conic (3), d opacity, d colour (3).
-const SLOT: u32 = 9u;
 
 fn finite(x: f32) -> bool {
     return (bitcast<u32>(x) & 0x7f800000u) != 0x7f800000u;
@@ -63,7 +61,7 @@ fn entry_of(g: u32, t: u32) -> u32 {
     return lo;
 }
 
-@compute @workgroup_size(256, 1, 1)
+@compute @workgroup_size(GROUP, 1, 1)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>,
         @builtin(local_invocation_index) lid: u32) {
     let g = linear_id(wg, groups, lid);
@@ -118,16 +116,15 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) groups: v
         let l1 = rendered.y;
         let l2 = rendered.z;
         let th = rendered.w;
+        let sigma = lsr_covariance(l1, l2, th);
+        let a = sigma.x * fw * fw;
+        let c = sigma.z * fh * fh;
+        let bb = sigma.y * fw * fh;
         let sn = sin(th);
         let cs = cos(th);
-        let w1 = exp(2.0 * clamp(l1, LN_SIGMA_MIN, LN_SIGMA_MAX));
-        let w2 = exp(2.0 * clamp(l2, LN_SIGMA_MIN, LN_SIGMA_MAX));
         let cc = cs * cs;
         let ss = sn * sn;
         let sc = sn * cs;
-        let a = (cc * w1 + ss * w2) * fw * fw;
-        let c = (ss * w1 + cc * w2) * fh * fh;
-        let bb = sc * (w1 - w2) * fw * fh;
         var d_suu = 0.0;
         if (a >= VAR_MIN && a <= VAR_MAX) {
             d_suu = d_a * fw * fw;

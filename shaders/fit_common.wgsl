@@ -6,9 +6,8 @@
 // a decoded scene, whichever covariance parameters it stores), colour (r, g, b),
 // opacity. The Adam moments use the same layout.
 
-const STRIDE: u32 = 9u;
-// Invocations per workgroup of every one-dimensional kernel.
-const GROUP: u32 = 256u;
+// STRIDE, and GROUP (invocations per workgroup of every one-dimensional kernel), come
+// with the contract constants, from the host's own.
 
 // One uniform block for the whole loop, rewritten by the host before each step.
 struct Fit {
@@ -55,4 +54,17 @@ fn linear_id(wg: vec3<u32>, groups: vec3<u32>, lid: u32) -> u32 {
 
 fn workgroup_index(wg: vec3<u32>, groups: vec3<u32>) -> u32 {
     return wg.y * groups.x + wg.x;
+}
+
+// `CovParam::LogScaleRotation.covariance`: Σ = R diag(σ1², σ2²) Rᵀ in image units, as
+// (Σuu, Σuv, Σvv), σ = exp of the clamped log-scale. The projection and the chain rule
+// both take it from here, so the clamps they test see the same numbers.
+fn lsr_covariance(l1: f32, l2: f32, th: f32) -> vec3<f32> {
+    let s1 = exp(clamp(l1, LN_SIGMA_MIN, LN_SIGMA_MAX));
+    let s2 = exp(clamp(l2, LN_SIGMA_MIN, LN_SIGMA_MAX));
+    let sn = sin(th);
+    let cs = cos(th);
+    let v1 = s1 * s1;
+    let v2 = s2 * s2;
+    return vec3<f32>(cs * cs * v1 + sn * sn * v2, sn * cs * (v1 - v2), sn * sn * v1 + cs * cs * v2);
 }

@@ -9,7 +9,7 @@
 @group(0) @binding(3) var<storage, read_write> keys: array<u32>;
 @group(0) @binding(4) var<storage, read_write> values: array<u32>;
 
-@compute @workgroup_size(256, 1, 1)
+@compute @workgroup_size(GROUP, 1, 1)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>,
         @builtin(local_invocation_index) lid: u32) {
     let g = linear_id(wg, groups, lid);

@@ -10,14 +10,14 @@
 @group(0) @binding(4) var<storage, read_write> loss_part: array<f32>;
 @group(0) @binding(5) var<storage, read_write> sse8_part: array<u32>;
 
-var<workgroup> sq: array<f32, 256>;
-var<workgroup> sq8: array<u32, 256>;
+var<workgroup> sq: array<f32, GROUP>;
+var<workgroup> sq8: array<u32, GROUP>;
 
 fn byte(x: f32) -> i32 {
     return i32(floor(clamp(x, 0.0, 1.0) * 255.0 + 0.5));
 }
 
-@compute @workgroup_size(256, 1, 1)
+@compute @workgroup_size(GROUP, 1, 1)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>,
         @builtin(local_invocation_index) lid: u32) {
     let p = linear_id(wg, groups, lid);

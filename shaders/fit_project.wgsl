@@ -59,7 +59,7 @@ fn pixel_span(m: f32, r: f32, n: u32) -> vec2<u32> {
     return vec2<u32>(a, b);
 }
 
-@compute @workgroup_size(256, 1, 1)
+@compute @workgroup_size(GROUP, 1, 1)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>,
         @builtin(local_invocation_index) lid: u32) {
     let g = linear_id(wg, groups, lid);
@@ -81,31 +81,19 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) groups: v
 
     // Steps 1-4 (`CovParam::covariance`, then the pixel clamps and the conic). The
     // clamps keep det ≥ (1 - CORRELATION_MAX²)·VAR_MIN² > 0, so the conic is finite.
-    var su: f32;
-    var suv: f32;
-    var sv: f32;
+    var s = vec3<f32>(0.0);
     if (fit.cholesky != 0u) {
         let l11 = clamp(p[2], -CHOLESKY_MAX, CHOLESKY_MAX);
         let l21 = clamp(p[3], -CHOLESKY_MAX, CHOLESKY_MAX);
         let l22 = clamp(p[4], -CHOLESKY_MAX, CHOLESKY_MAX);
-        su = l11 * l11;
-        suv = l11 * l21;
-        sv = l21 * l21 + l22 * l22;
+        s = vec3<f32>(l11 * l11, l11 * l21, l21 * l21 + l22 * l22);
     } else {
-        let s1 = exp(clamp(p[2], LN_SIGMA_MIN, LN_SIGMA_MAX));
-        let s2 = exp(clamp(p[3], LN_SIGMA_MIN, LN_SIGMA_MAX));
-        let sn = sin(p[4]);
-        let cs = cos(p[4]);
-        let v1 = s1 * s1;
-        let v2 = s2 * s2;
-        su = cs * cs * v1 + sn * sn * v2;
-        suv = sn * cs * (v1 - v2);
-        sv = sn * sn * v1 + cs * cs * v2;
+        s = lsr_covariance(p[2], p[3], p[4]);
     }
-    let a = clamp(su * fw * fw, VAR_MIN, VAR_MAX);
-    let c = clamp(sv * fh * fh, VAR_MIN, VAR_MAX);
+    let a = clamp(s.x * fw * fw, VAR_MIN, VAR_MAX);
+    let c = clamp(s.z * fh * fh, VAR_MIN, VAR_MAX);
     let lim = CORRELATION_MAX * sqrt(a * c);
-    let b = clamp(suv * fw * fh, -lim, lim);
+    let b = clamp(s.y * fw * fh, -lim, lim);
     let det = a * c - b * b;
 
     // Steps 5-6: centre and pixel box.

@@ -7,10 +7,10 @@
 // (min, max) per component.
 @group(0) @binding(2) var<storage, read_write> ranges: array<f32>;
 
-var<workgroup> lo: array<f32, 256>;
-var<workgroup> hi: array<f32, 256>;
+var<workgroup> lo: array<f32, GROUP>;
+var<workgroup> hi: array<f32, GROUP>;
 
-@compute @workgroup_size(256, 1, 1)
+@compute @workgroup_size(GROUP, 1, 1)
 fn main(@builtin(local_invocation_index) lid: u32) {
     for (var k = 0u; k < STRIDE; k = k + 1u) {
         var a = 3.4e38;

@@ -1,6 +1,6 @@
 // Where each Gaussian's tile-list entries start: an exclusive prefix sum of `touched`
 // in stored order, and the total, which sizes the sort. One workgroup: each invocation
-// sums a contiguous share, a scan of the 256 shares, then each writes its share's
+// sums a contiguous share, a scan of the GROUP shares, then each writes its share's
 // offsets. Sums saturate, so an absurd total reads as an overflow, never as a small
 // wrapped count.
 
@@ -9,14 +9,14 @@
 // [0]: entries in all (the sort's count).
 @group(0) @binding(3) var<storage, read_write> entries: array<u32>;
 
-var<workgroup> sums: array<u32, 256>;
+var<workgroup> sums: array<u32, GROUP>;
 
 fn add_sat(a: u32, b: u32) -> u32 {
     let s = a + b;
     return select(s, 0xffffffffu, s < a);
 }
 
-@compute @workgroup_size(256, 1, 1)
+@compute @workgroup_size(GROUP, 1, 1)
 fn main(@builtin(local_invocation_index) lid: u32) {
     let n = fit.count;
     let share = (n + GROUP - 1u) / GROUP;

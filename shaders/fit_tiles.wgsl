@@ -6,7 +6,7 @@
 @group(0) @binding(2) var<storage, read> entries: array<u32>;
 @group(0) @binding(3) var<storage, read_write> offsets: array<u32>;
 
-@compute @workgroup_size(256, 1, 1)
+@compute @workgroup_size(GROUP, 1, 1)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>,
         @builtin(local_invocation_index) lid: u32) {
     let t = linear_id(wg, groups, lid);

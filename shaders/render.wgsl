@@ -4,8 +4,9 @@
 // This is format-spec.md §6.3–6.4, the same per-pixel rule as the CPU renderer
 // (`Projected::alpha_at` and `render::cpu`), evaluated in f32 in the same order. Only
 // `exp` may round differently on a GPU, which is why GPU and CPU agree to 1/255 rather
-// than bit for bit. Projection (covariance clamps, conic, pixel box) and binning are done
-// once on the CPU by `render::project`, so every renderer shares them.
+// than bit for bit. Projection (covariance clamps, conic, pixel box) and binning come
+// from the CPU's `render::project` (`Gpu::render`), or from `fit_project.wgsl` and the
+// radix sort (the resident pipeline of `gpu::forward`).
 //
 // The contract constants (TILE, ALPHA_MIN, …) are prepended by the host, written from the
 // Rust constants (`gpu::contract`).
@@ -25,7 +26,8 @@ struct Params {
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
-// Three vec4 per Gaussian: (mx, my, A, B), (C, opacity, r, g), (b, -, -, -).
+// Three vec4 per Gaussian: (mx, my, A, B), (C, opacity, r, g), (b, …); the lanes after
+// b are not read here.
 @group(0) @binding(1) var<storage, read> gaussians: array<vec4<f32>>;
 // Pixel box per Gaussian: (x0, y0, x1, y1), inclusive.
 @group(0) @binding(2) var<storage, read> boxes: array<vec4<u32>>;

@@ -7,8 +7,8 @@
 // Digits are 8 bits: 256 bins, one per invocation.
 
 const SORT_WG: u32 = 256u;
-const SORT_ROUNDS: u32 = 4u;
-const SORT_BLOCK: u32 = 1024u; // SORT_WG * SORT_ROUNDS; must equal `sort::BLOCK`
+// SORT_BLOCK comes with the contract constants, from `sort::BLOCK`.
+const SORT_ROUNDS: u32 = SORT_BLOCK / SORT_WG;
 
 struct SortParams {
     // The digit of this pass is (key >> shift) & 255.

@@ -137,6 +137,8 @@ const FILE_OVERHEAD: f32 = 300.0;
 pub struct Fitter<'a> {
     target: &'a Target,
     blend: Blend,
+    /// The parameters. While a GPU fit is resident they are those of its last
+    /// [`Fitter::sync`], and what is written here is lost at the next one.
     pub params: GaussianSet,
     adam: params::Adam,
     loss: loss::LossFn,
@@ -194,11 +196,17 @@ impl<'a> Fitter<'a> {
         self.scene_of(self.params.clone())
     }
 
-    /// Parameters as they will be after quantization with `bits`.
+    /// Parameters as they will be after quantization with `bits`. Opacities that are
+    /// all 1 are not stored (the file has no opacity attribute); they stay here, at 1,
+    /// so that the straight-through gradient still reaches them.
     fn quantized(&self, bits: BitDepths) -> GaussianSet {
-        Records::from_scene(&self.scene(), bits)
+        let mut q = Records::from_scene(&self.scene(), bits)
             .to_scene()
-            .gaussians
+            .gaussians;
+        if self.params.opacity.is_some() && q.opacity.is_none() {
+            q.opacity = Some(vec![1.0; q.len()]);
+        }
+        q
     }
 
     /// Replace the colours by their least-squares optimum for the current geometry.
@@ -306,8 +314,12 @@ impl<'a> Fitter<'a> {
         match resident.step(lr, qat, measure) {
             Ok(report) => Some(report.map(|r| (r.loss, r.psnr))),
             Err(e) => {
-                // What the GPU holds may be lost: go on from the last sync.
-                self.resident = None;
+                // Continue from what the GPU holds if it can still say, else from the
+                // last sync.
+                if let Some(Ok((params, adam))) = self.resident.take().map(|r| r.download()) {
+                    self.params = params;
+                    self.adam.set_state(adam);
+                }
                 self.gpu_failed(&e);
                 None
             }
@@ -316,7 +328,7 @@ impl<'a> Fitter<'a> {
 
     #[cfg(feature = "gpu")]
     fn gpu_failed(&mut self, e: &Error) {
-        eprintln!("gsi: the GPU failed ({e}); fitting continues on the CPU");
+        eprintln!("gsi: fitting continues on the CPU: {e}");
         self.gpu = None;
         self.resident = None;
     }

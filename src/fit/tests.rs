@@ -175,3 +175,36 @@ fn colour_least_squares_reproduces_a_reachable_image() {
         assert!(err < 2e-3, "{blend:?}: max error {err}");
     }
 }
+
+/// Opacities all at 1 are not stored (no opacity attribute), but a quantization-aware step
+/// still renders them at 1 and passes their gradient straight through, as the GPU loop
+/// does: the opacities move.
+#[test]
+fn quantization_aware_steps_keep_unstored_opacities() {
+    use super::{default_bits, Fitter, Init, LearningRates, Loss};
+    let scene = random_scene(4, SceneSpec::new(40, 30, 80, Blend::Alpha));
+    let mut target = render(&scene, 40, 30).unwrap();
+    target.data.iter_mut().for_each(|v| *v = v.clamp(0.0, 1.0));
+    let mut f = Fitter::new(&target, 60, Init::Adaptive, Blend::Alpha, Loss::L2, 1);
+    let n = f.params.len();
+    f.params.opacity = Some(vec![1.0; n]);
+    let bits = default_bits(40, 30, Blend::Alpha);
+    assert_eq!(f.quantized(bits).opacity, Some(vec![1.0; n]));
+    let lr = LearningRates {
+        position: 0.0,
+        log_scale: 0.0,
+        rotation: 0.0,
+        color: 0.0,
+        opacity: 0.01,
+    };
+    f.step(&lr, Some(bits), false);
+    let moved = f
+        .params
+        .opacity
+        .as_ref()
+        .unwrap()
+        .iter()
+        .filter(|&&o| o < 1.0)
+        .count();
+    assert!(moved > 0, "no opacity moved");
+}

@@ -24,7 +24,7 @@ pub use error::{Error, ErrorKind, Result};
 pub use header::{ColorSpace, Header, FLAG_IMPORTANCE_ORDERED, VERSION_MAJOR, VERSION_MINOR};
 pub use limits::Limits;
 pub use meta::CompressionMeta;
-pub use quant::Quantizer;
+pub use quant::{Quantizer, MAX_BITS};
 pub use reader::{read_file, Decoder, GsiFile};
 pub use records::{Attribute, BitDepths, Records};
 pub use writer::{to_bytes, write_file, WriteOptions};

@@ -4,7 +4,8 @@
 //! The parameters, Adam's moments, the target and every intermediate stay in GPU
 //! buffers. A step is one submission of these kernels, in order:
 //! 1. `fit_range` (quantization-aware steps only): each component's range, as
-//!    `Quantizer::fit` takes it.
+//!    `Quantizer::fit` takes it. The quantization itself runs in `f32` where the CPU's
+//!    uses `f64`: a value on the midpoint of two codes may take the other one.
 //! 2. `fit_project`: the rendered parameters (quantized when asked) projected as
 //!    `render::project` does, and the tiles each covers.
 //! 3. `fit_scan`, `fit_emit`, the radix sort ([`super::sort`]) and `fit_tiles`: tile lists
@@ -17,18 +18,19 @@
 //! back only when asked for progress: the partial sums of the loss and of the 8-bit
 //! squared error, and the number of tile-list entries, which is how the buffers learn
 //! that they must grow. A step whose lists overflowed is skipped on the GPU
-//! (`fit_adam.wgsl`); with the lists sized at twice the last count seen, that takes a
-//! Gaussian set whose tile coverage more than doubles between two progress reports.
+//! (`fit_adam.wgsl`). The lists hold twice the entries of the last report and are doubled
+//! again whenever a report finds them three-quarters full, so a skip takes a set whose
+//! tile coverage grows by a third within the ten steps between two reports.
 //!
 //! Pruning, re-placement and colour solves stay on the CPU ([`crate::fit::Fitter`]): the
 //! fitter downloads the state before them and uploads it after, a few times per fit.
 
-use super::forward::{capacity_for, entries_of, flatten, Forward, ForwardLists};
+use super::forward::{capacity_for, flatten, Forward, ForwardLists};
 use super::sort::RadixSort;
-use super::{Gpu, Kernel};
+use super::{too_big, Gpu, Kernel};
 use crate::fit::LearningRates;
-use crate::format::{BitDepths, Error, ErrorKind, Result};
-use crate::model::{Blend, CovParam, GaussianSet, Scene};
+use crate::format::{BitDepths, Error, ErrorKind, Limits, Result, MAX_BITS};
+use crate::model::{Blend, GaussianSet};
 use crate::render::{RgbImage, TILE};
 use wgpu::util::DeviceExt;
 
@@ -37,8 +39,6 @@ use wgpu::util::DeviceExt;
 pub(crate) const STRIDE: usize = 9;
 /// Invocations per workgroup of the one-dimensional kernels (`GROUP`).
 pub(crate) const GROUP: u32 = 256;
-/// Floats per tile-list entry written by the backward passes (`SLOT`).
-const SLOT: u64 = 9;
 
 /// The pipelines of the loop, built the first time a fit runs on a device.
 pub(crate) struct FitKernels {
@@ -191,6 +191,7 @@ impl<'g> ResidentFit<'g> {
         adam: &AdamState,
     ) -> Result<ResidentFit<'g>> {
         let (w, h) = (target.width, target.height);
+        Limits::default().check_output(w, h)?;
         let count = params.len();
         if count == 0
             || count > u32::MAX as usize / 64
@@ -221,14 +222,7 @@ impl<'g> ResidentFit<'g> {
         }
         let forward = Forward::new(gpu, &uniform, &flat)?;
         let back = Backward::new(gpu, &forward, &uniform, target, adam)?;
-        let scene = Scene {
-            width: w,
-            height: h,
-            blend,
-            cov_param: CovParam::LogScaleRotation,
-            gaussians: params.clone(),
-        };
-        let capacity = capacity_for(entries_of(&scene, w, h));
+        let capacity = capacity_for(forward.count_entries(gpu)?);
         let lists = Lists::new(gpu, &forward, &back, blend, capacity)?;
         Ok(ResidentFit {
             gpu,
@@ -247,7 +241,8 @@ impl<'g> ResidentFit<'g> {
     /// One optimizer step with learning rates `lr`; with `qat`, the render uses the
     /// parameters quantized to those bit depths and the gradient moves the float ones
     /// (straight-through). When `measure` is set, waits for the GPU and returns the loss
-    /// and PSNR of the image this step rendered.
+    /// and PSNR of the image this step rendered, or `None` if its tile lists overflowed
+    /// (the step was skipped, and the lists grow before the next).
     pub fn step(
         &mut self,
         lr: &LearningRates,
@@ -266,7 +261,8 @@ impl<'g> ResidentFit<'g> {
         u.lr = [lr.position, lr.log_scale, lr.rotation, lr.color, lr.opacity];
         u.qat = u32::from(qat.is_some());
         if let Some(b) = qat {
-            u.bits = [b.position, b.covariance, b.color, b.opacity].map(u32::from);
+            u.bits =
+                [b.position, b.covariance, b.color, b.opacity].map(|b| u32::from(b.min(MAX_BITS)));
         }
         gpu.queue
             .write_buffer(&self.forward.fit, 0, bytemuck::bytes_of(&self.uniform));
@@ -301,8 +297,19 @@ impl<'g> ResidentFit<'g> {
             .map(|&x| u64::from(x))
             .sum();
         let values = u64::from(self.uniform.width) * u64::from(self.uniform.height) * 3;
-        if u64::from(entries) * 4 > u64::from(self.lists.forward.capacity) * 3 {
-            self.grow_to = Some(capacity_for(u64::from(entries)));
+        let (entries, capacity) = (u64::from(entries), u64::from(self.lists.forward.capacity));
+        if entries * 4 > capacity * 3 {
+            let grown = capacity_for(entries);
+            if u64::from(grown) < entries {
+                return Err(too_big(&gpu.info, "the tile lists of this fit"));
+            }
+            self.grow_to = Some(grown);
+        }
+        if entries > capacity {
+            // Skipped, so not counted in Adam's bias correction (an unmeasured step that
+            // overflowed before it still is: the host cannot know of it).
+            self.adam_step -= 1;
+            return Ok(None);
         }
         Ok(Some(StepReport {
             loss: (loss / values as f64) as f32,
@@ -389,9 +396,9 @@ impl Backward {
 
 impl Lists {
     fn new(gpu: &Gpu, f: &Forward, b: &Backward, blend: Blend, capacity: u32) -> Result<Lists> {
-        let forward = ForwardLists::new(gpu, f, capacity, SLOT * 4)?;
+        let forward = ForwardLists::new(gpu, f, capacity, super::SLOT as u64 * 4)?;
         let device = &gpu.device;
-        let slots = gpu.zeroed(u64::from(capacity) * SLOT * 4);
+        let slots = gpu.zeroed(u64::from(capacity) * super::SLOT as u64 * 4);
         let values = &forward.values;
         Ok(Lists {
             backward: gpu.backward_kernel(blend).bind(
@@ -441,16 +448,7 @@ mod tests {
     use crate::fit::{Fitter, Init, Loss};
     use crate::synth::{random_scene, SceneSpec};
 
-    fn gpu() -> Option<Gpu> {
-        match Gpu::new() {
-            Ok(g) => Some(g),
-            Err(e) if std::env::var_os("GSI_REQUIRE_GPU").is_some() => panic!("{e}"),
-            Err(e) => {
-                eprintln!("skipped: {e}");
-                None
-            }
-        }
-    }
+    use crate::gpu::tests::gpu;
 
     const LR: LearningRates = LearningRates {
         position: 2e-4,

@@ -11,7 +11,7 @@ use super::sort::SortPlan;
 use super::{too_big, Gpu};
 use crate::format::{Error, ErrorKind, Limits, Result};
 use crate::model::{CovParam, GaussianSet, Scene};
-use crate::render::{project_scene, RgbImage, TILE};
+use crate::render::RgbImage;
 use wgpu::util::DeviceExt;
 
 /// Buffers and bindings of the forward half whose size the image and the number of
@@ -58,6 +58,9 @@ impl Forward {
             if bytes > gpu.max_binding {
                 return Err(too_big(&gpu.info, "this set of Gaussians at this size"));
             }
+        }
+        if uniform.tiles_x.max(uniform.tiles_y) > gpu.max_groups {
+            return Err(too_big(&gpu.info, "a dispatch over the tiles of this size"));
         }
         let device = &gpu.device;
         let k = gpu.fit_kernels();
@@ -108,6 +111,23 @@ impl Forward {
             entries,
             render_params,
         })
+    }
+
+    /// The tile-list entries the Gaussians need as uploaded (a projection and a scan on
+    /// the GPU, and one number read back).
+    pub(crate) fn count_entries(&self, gpu: &Gpu) -> Result<u64> {
+        let k = gpu.fit_kernels();
+        let mut enc = gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        {
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
+            k.project
+                .dispatch(&mut pass, &self.project, self.gaussian_groups);
+            k.scan.dispatch(&mut pass, &self.scan, (1, 1));
+        }
+        let [entries] = gpu.read_back(enc, [&self.entries])?;
+        Ok(u64::from(bytemuck::cast_slice::<u8, u32>(&entries)[0]))
     }
 
     /// Record projection and binning: a compute pass, then the sort's.
@@ -168,9 +188,7 @@ impl ForwardLists {
         let values = gpu.zeroed(u64::from(capacity) * 4);
         let tiles = f.tiles.0 * f.tiles.1;
         let key_bits = (32 - tiles.saturating_sub(1).leading_zeros()).max(1);
-        let plan = SortPlan::new(
-            device, &k.sort, &keys, &values, &f.entries, capacity, key_bits,
-        )?;
+        let plan = SortPlan::new(gpu, &k.sort, &keys, &values, &f.entries, capacity, key_bits)?;
         Ok(ForwardLists {
             capacity,
             emit: k
@@ -196,20 +214,12 @@ impl ForwardLists {
     }
 }
 
+/// Most tile-list entries: keeps `SLOT · entry` and every other index within a `u32`.
+pub(crate) const MAX_ENTRIES: u32 = u32::MAX / 64;
+
 /// List capacity for a set that covers `entries` tile entries now: room to double.
 pub(crate) fn capacity_for(entries: u64) -> u32 {
-    (entries.saturating_mul(2)).clamp(4096, u64::from(u32::MAX / 64)) as u32
-}
-
-/// Tile-list entries of `scene` at `width × height`, as the CPU projects it.
-pub(crate) fn entries_of(scene: &Scene, width: u32, height: u32) -> u64 {
-    project_scene(scene, width, height)
-        .iter()
-        .map(|g| {
-            let b = g.bbox;
-            u64::from(b.x1 / TILE - b.x0 / TILE + 1) * u64::from(b.y1 / TILE - b.y0 / TILE + 1)
-        })
-        .sum()
+    (entries.saturating_mul(2)).clamp(4096, u64::from(MAX_ENTRIES)) as u32
 }
 
 /// `STRIDE` floats per Gaussian; `opacity` stands in where the set has none.
@@ -279,20 +289,13 @@ impl<'g> GpuScene<'g> {
                 p
             })
             .collect();
-        let capacity = capacity_for(entries_of(scene, width, height));
         let forward = Forward::new(gpu, &uniform, &params)?;
-        let s = GpuScene::with_lists(gpu, forward, uniform, capacity)?;
-        // The CPU's count, doubled, leaves room for the GPU's own rounding; check it.
-        let [entries] = gpu.read_back(s.frame(), [&s.forward.entries])?;
-        let entries = u64::from(bytemuck::cast_slice::<u8, u32>(&entries)[0]);
-        if entries <= u64::from(capacity) {
-            return Ok(s);
-        }
-        let capacity = capacity_for(entries);
-        if u64::from(capacity) < entries {
+        // A scene does not move: its lists need exactly the entries it has now.
+        let entries = forward.count_entries(gpu)?;
+        if entries > u64::from(MAX_ENTRIES) {
             return Err(too_big(&gpu.info, "the tile lists of this scene"));
         }
-        GpuScene::with_lists(gpu, s.forward, uniform, capacity)
+        GpuScene::with_lists(gpu, forward, uniform, entries.max(1) as u32)
     }
 
     fn with_lists(

@@ -13,8 +13,10 @@
 //!
 //! The adapter is headless (no surface) and honours wgpu's environment variables:
 //! `WGPU_BACKEND` (e.g. `vulkan`), `WGPU_ADAPTER_NAME` (a substring of the adapter's
-//! name) and `WGPU_POWER_PREF`. Large outputs and long tile lists are split into bands
-//! of tile rows so that no buffer exceeds the adapter's limits.
+//! name) and `WGPU_POWER_PREF`. [`Gpu::render`] splits large outputs and long tile lists
+//! into bands of tile rows so that no buffer exceeds the adapter's limits; the resident
+//! pipelines keep whole images and refuse, with [`ErrorKind::LimitExceeded`], what does
+//! not fit (the fitter then continues on the CPU).
 
 use crate::format::{Error, ErrorKind, Limits, Result};
 use crate::model::{Blend, Scene};
@@ -29,8 +31,9 @@ macro_rules! shader {
     };
 }
 
-/// The constants of the pixel contract (format-spec.md §6) and of the model, written as
-/// WGSL from the Rust constants themselves, so that no shader can drift from the CPU.
+/// The constants of the pixel contract (format-spec.md §6), of the model and of the
+/// buffer layouts host and shaders share, written as WGSL from the Rust constants
+/// themselves, so that no shader can drift from the CPU or the host.
 fn contract() -> String {
     use crate::model::{CHOLESKY_MAX, LN_SIGMA_MAX, LN_SIGMA_MIN};
     use crate::render::{
@@ -50,7 +53,16 @@ fn contract() -> String {
         ("LN_SIGMA_MAX", LN_SIGMA_MAX),
         ("CHOLESKY_MAX", CHOLESKY_MAX),
     ];
-    let mut out = format!("const TILE: u32 = {TILE}u;\n");
+    let mut out = String::new();
+    for (name, value) in [
+        ("TILE", TILE),
+        ("GROUP", fit::GROUP),
+        ("STRIDE", fit::STRIDE as u32),
+        ("SLOT", SLOT as u32),
+        ("SORT_BLOCK", sort::BLOCK),
+    ] {
+        out += &format!("const {name}: u32 = {value}u;\n");
+    }
     for (name, value) in floats {
         // `{:?}` prints the shortest decimal that reads back as the same f32.
         out += &format!("const {name}: f32 = {value:?};\n");
@@ -83,6 +95,10 @@ impl std::fmt::Display for GpuError {
 }
 
 impl std::error::Error for GpuError {}
+
+/// Floats per tile-list entry written by the backward passes: d mean (2), d conic (3),
+/// d opacity, d colour (3).
+pub(crate) const SLOT: usize = 9;
 
 /// A device with the render pipeline built, ready for any number of renders.
 pub struct Gpu {
@@ -237,7 +253,10 @@ impl Gpu {
         }
         let row_bytes = u64::from(width) * u64::from(TILE) * 12;
         let gaussian_bytes = proj.len() as u64 * 48;
-        if gaussian_bytes > self.max_binding || row_bytes > self.max_binding {
+        if gaussian_bytes > self.max_binding
+            || row_bytes > self.max_binding
+            || tiles_x > self.max_groups
+        {
             return Err(too_big(&self.info, "one tile row"));
         }
         let (gaussians, boxes) = upload_layout(proj);
@@ -248,6 +267,7 @@ impl Gpu {
             // Grow the band while its index list and output fit in one binding.
             let (mut end, mut entries) = (ty, 0u64);
             while end < tiles_y
+                && end - ty < self.max_groups
                 && (entries + per_row[end as usize]) * 4 <= self.max_binding
                 && u64::from(end - ty + 1) * row_bytes <= self.max_binding
             {
@@ -340,6 +360,9 @@ impl Gpu {
         assert_eq!(dl_dimage.len(), width as usize * height as usize * 3);
         let tiles_x = width.div_ceil(TILE);
         let tiles_y = height.div_ceil(TILE);
+        if tiles_x.max(tiles_y) > self.max_groups {
+            return Err(too_big(&self.info, "the backward pass of this image"));
+        }
         let (offsets, indices) = tile_lists(proj, tiles_x, 0..tiles_y);
         let mut slots = vec![0.0f32; indices.len() * 9];
         if proj.is_empty() || indices.is_empty() {
@@ -422,46 +445,46 @@ impl Gpu {
         mut enc: wgpu::CommandEncoder,
         buffers: [&wgpu::Buffer; N],
     ) -> Result<[Vec<u8>; N]> {
-        let total: u64 = buffers.iter().map(|b| b.size()).sum();
-        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
-            label: None,
-            size: total.max(4),
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
+        // One staging buffer per source: each fits the adapter since its source does.
+        let staging = buffers.map(|b| {
+            let s = self.device.create_buffer(&wgpu::BufferDescriptor {
+                label: None,
+                size: b.size(),
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            enc.copy_buffer_to_buffer(b, 0, &s, 0, b.size());
+            s
         });
-        let mut at = 0;
-        for b in buffers {
-            enc.copy_buffer_to_buffer(b, 0, &staging, at, b.size());
-            at += b.size();
-        }
         self.queue.submit([enc.finish()]);
-        let slice = staging.slice(..);
         let (tx, rx) = std::sync::mpsc::channel();
-        slice.map_async(wgpu::MapMode::Read, move |r| {
-            let _ = tx.send(r);
-        });
+        for s in &staging {
+            let tx = tx.clone();
+            s.slice(..).map_async(wgpu::MapMode::Read, move |r| {
+                let _ = tx.send(r);
+            });
+        }
+        drop(tx);
         self.device
             .poll(wgpu::PollType::wait_indefinitely())
             .map_err(|e| Error::new(ErrorKind::Io, format!("GPU: {e}")))?;
-        if !matches!(rx.recv(), Ok(Ok(()))) {
+        if !rx.iter().all(|r| r.is_ok()) {
             return Err(Error::new(
                 ErrorKind::Io,
                 "GPU: reading the result back failed",
             ));
         }
-        let out = {
-            let view = slice
+        let mut out = Vec::with_capacity(N);
+        for s in &staging {
+            let view = s
+                .slice(..)
                 .get_mapped_range()
                 .map_err(|e| Error::new(ErrorKind::Io, format!("GPU: {e}")))?;
-            let mut at = 0usize;
-            buffers.map(|b| {
-                let part = view[at..at + b.size() as usize].to_vec();
-                at += b.size() as usize;
-                part
-            })
-        };
-        staging.unmap();
-        Ok(out)
+            out.push(view.to_vec());
+            drop(view);
+            s.unmap();
+        }
+        Ok(out.try_into().expect("N parts"))
     }
 
     /// Workgroups of [`fit::GROUP`] invocations for `n` items, laid out in two
@@ -680,4 +703,22 @@ async fn pick_adapter(instance: &wgpu::Instance) -> std::result::Result<wgpu::Ad
         })
         .await
         .map_err(|e| GpuError(format!("no GPU adapter: {e}")))
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    /// A device for a test, or `None` (and a note) where there is none, unless
+    /// `GSI_REQUIRE_GPU` is set, which makes that a failure, as in CI.
+    pub(crate) fn gpu() -> Option<super::Gpu> {
+        match super::Gpu::new() {
+            Ok(g) => Some(g),
+            Err(e) if std::env::var_os("GSI_REQUIRE_GPU").is_some() => {
+                panic!("GSI_REQUIRE_GPU is set but {e}")
+            }
+            Err(e) => {
+                eprintln!("skipped: {e}");
+                None
+            }
+        }
+    }
 }

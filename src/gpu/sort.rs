@@ -9,14 +9,12 @@
 //! (written by an earlier kernel), which the host never reads: every kernel is dispatched
 //! for the buffers' capacity and ignores the items past the count.
 
-// Not yet called outside the tests: the GPU binning that uses it lands separately.
-
 use super::Kernel;
 use crate::format::{Error, ErrorKind, Result};
 use wgpu::util::DeviceExt;
 
-/// Items per block, one workgroup's share (`SORT_BLOCK` in `shaders/sort_common.wgsl`).
-const BLOCK: u32 = 1024;
+/// Items per block, one workgroup's share (`SORT_BLOCK` of the shaders' prelude).
+pub(crate) const BLOCK: u32 = 1024;
 /// Bits per digit; `2^DIGIT_BITS` bins (the workgroup size of every sort kernel).
 const DIGIT_BITS: u32 = 8;
 const BINS: u64 = 1 << DIGIT_BITS;
@@ -85,7 +83,7 @@ impl SortPlan {
     /// above 32 or buffers smaller than `capacity` (`count` needs 4 bytes). The plan's
     /// bind groups belong to `sort`'s pipelines: record it with the same `sort`.
     pub(crate) fn new(
-        device: &wgpu::Device,
+        gpu: &super::Gpu,
         sort: &RadixSort,
         keys: &wgpu::Buffer,
         values: &wgpu::Buffer,
@@ -101,13 +99,11 @@ impl SortPlan {
         }
         let bytes = u64::from(capacity) * 4;
         let passes = key_bits.div_ceil(DIGIT_BITS);
-        let limits = device.limits();
-        let max_binding = limits
-            .max_storage_buffer_binding_size
-            .min(limits.max_buffer_size);
+        let device = &gpu.device;
+        let max_binding = gpu.max_binding;
         let blocks = capacity.div_ceil(BLOCK);
         let hist_bytes = BINS * u64::from(blocks) * 4;
-        let max_groups = limits.max_compute_workgroups_per_dimension.max(1);
+        let max_groups = gpu.max_groups.max(1);
         let gx = blocks.clamp(1, max_groups);
         let groups = (gx, blocks.div_ceil(gx));
         if bytes > max_binding || hist_bytes > max_binding || groups.1 > max_groups {
@@ -212,18 +208,7 @@ mod tests {
     use super::*;
     use crate::synth::SplitMix64;
 
-    fn gpu() -> Option<super::super::Gpu> {
-        match super::super::Gpu::new() {
-            Ok(g) => Some(g),
-            Err(e) if std::env::var_os("GSI_REQUIRE_GPU").is_some() => {
-                panic!("GSI_REQUIRE_GPU is set but {e}")
-            }
-            Err(e) => {
-                eprintln!("skipped: {e}");
-                None
-            }
-        }
-    }
+    use super::super::tests::gpu;
 
     fn buffer(gpu: &super::super::Gpu, data: &[u32]) -> wgpu::Buffer {
         // A binding may not be empty.
@@ -239,25 +224,9 @@ mod tests {
     }
 
     fn read(gpu: &super::super::Gpu, buf: &wgpu::Buffer, len: usize) -> Vec<u32> {
-        let bytes = (len.max(1) * 4) as u64;
-        let staging = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-            label: None,
-            size: bytes,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let mut enc = gpu.device.create_command_encoder(&Default::default());
-        enc.copy_buffer_to_buffer(buf, 0, &staging, 0, bytes);
-        gpu.queue.submit([enc.finish()]);
-        staging
-            .slice(..)
-            .map_async(wgpu::MapMode::Read, |r| r.unwrap());
-        gpu.device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .unwrap();
-        let out =
-            bytemuck::cast_slice(&staging.slice(..).get_mapped_range().unwrap())[..len].to_vec();
-        out
+        let enc = gpu.device.create_command_encoder(&Default::default());
+        let [bytes] = gpu.read_back(enc, [buf]).unwrap();
+        bytemuck::cast_slice::<u8, u32>(&bytes)[..len].to_vec()
     }
 
     /// Sort `keys` (values: their indices) on the GPU with `count` live pairs and check the
@@ -270,7 +239,7 @@ mod tests {
             buffer(gpu, &values),
             buffer(gpu, &[count]),
         );
-        let plan = SortPlan::new(&gpu.device, sort, &kb, &vb, &cb, capacity, key_bits).unwrap();
+        let plan = SortPlan::new(gpu, sort, &kb, &vb, &cb, capacity, key_bits).unwrap();
         let mut enc = gpu.device.create_command_encoder(&Default::default());
         plan.record(sort, &mut enc);
         gpu.queue.submit([enc.finish()]);
@@ -361,7 +330,7 @@ mod tests {
             buffer(&gpu, &[0; 16]),
             buffer(&gpu, &[0]),
         );
-        let plan = |capacity, bits| SortPlan::new(&gpu.device, &sort, &k, &v, &c, capacity, bits);
+        let plan = |capacity, bits| SortPlan::new(&gpu, &sort, &k, &v, &c, capacity, bits);
         let kind = |r: Result<SortPlan>| r.err().map(|e| e.kind());
         assert_eq!(kind(plan(16, 33)), Some(ErrorKind::InvalidValue));
         assert_eq!(kind(plan(17, 16)), Some(ErrorKind::InvalidValue));
