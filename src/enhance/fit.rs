@@ -209,6 +209,9 @@ pub struct Session<'a> {
     g_img: Vec<f32>,
     g_col: Vec<[f32; 3]>,
     g_map: Vec<f32>,
+    /// The forward pass's activations, per chunk of Gaussians, for the backward pass to
+    /// reuse; `None` where they would take more than [`TRACE_BYTES_MAX`].
+    traces: Option<Vec<Trace>>,
 }
 
 impl<'a> Session<'a> {
@@ -267,6 +270,7 @@ impl<'a> Session<'a> {
             g_img: vec![0.0; low.len()],
             g_col: vec![[0.0; 3]; n],
             g_map: vec![0.0; cells * opts.experts],
+            traces: Trace::for_chunks(n, opts.experts, opts.hidden),
             a,
             low,
             feats,
@@ -298,7 +302,13 @@ impl<'a> Session<'a> {
     fn loss_and_grad(&mut self) -> (ImageTerms, MapTerms) {
         self.refresh_enhancer();
         let (lay, c0) = (&self.lay, &self.scene.gaussians.colors);
-        mix_forward(&self.enh, &self.taps, c0, &mut self.colors);
+        mix_forward(
+            &self.enh,
+            &self.taps,
+            c0,
+            &mut self.colors,
+            self.traces.as_deref_mut(),
+        );
         self.a.render(&self.colors, &mut self.img);
         let terms = self.loss.eval_display(&mut self.img, &mut self.g_img);
         self.a.transpose(&self.g_img, &mut self.g_col);
@@ -309,6 +319,7 @@ impl<'a> Session<'a> {
             &self.taps,
             c0,
             &self.g_col,
+            self.traces.as_deref(),
             &mut self.g_map,
             &mut self.grad[lay.head_len()..],
         );
@@ -486,44 +497,108 @@ fn head_backward(
 /// A chunk of Gaussians' colours (or colour gradients).
 type Colors<'a> = &'a [[f32; 3]];
 
-/// Every Gaussian's mixed colour (paper Eq. 15) with the current parameters.
-fn mix_forward(enh: &Enhancer, taps: &[MapTap], c0: &[[f32; 3]], out: &mut [[f32; 3]]) {
-    let job = |(o, (t, c)): (&mut [[f32; 3]], (&[MapTap], Colors))| {
+/// Most memory the forward activations kept for the backward pass may take: with the
+/// defaults (K = 16, hidden width 8) about 1.1 kB per Gaussian, so a million Gaussians;
+/// beyond it the backward pass evaluates the operators again.
+const TRACE_BYTES_MAX: usize = 1 << 30;
+
+/// A chunk of Gaussians' forward activations: the mixture weights (K each), and per
+/// operator the two hidden pre-activations (hidden width each) and the unclamped output.
+/// Profiling showed the operators' evaluation to be the largest cost of an iteration,
+/// and without this the backward pass would evaluate them a second time.
+struct Trace {
+    w: Vec<f32>,
+    h1: Vec<f32>,
+    h2: Vec<f32>,
+    raw: Vec<[f32; 3]>,
+}
+
+impl Trace {
+    /// One trace per [`CHUNK`] of `n` Gaussians, or `None` over [`TRACE_BYTES_MAX`].
+    fn for_chunks(n: usize, experts: usize, hidden: usize) -> Option<Vec<Trace>> {
+        let ops = experts.saturating_sub(1);
+        let per = experts + ops * (2 * hidden + 3);
+        if n.checked_mul(per * 4)? > TRACE_BYTES_MAX {
+            return None;
+        }
+        let chunks = (0..n).step_by(CHUNK).map(|start| (n - start).min(CHUNK));
+        Some(
+            chunks
+                .map(|len| Trace {
+                    w: vec![0.0; len * experts],
+                    h1: vec![0.0; len * ops * hidden],
+                    h2: vec![0.0; len * ops * hidden],
+                    raw: vec![[0.0; 3]; len * ops],
+                })
+                .collect(),
+        )
+    }
+}
+
+/// Every Gaussian's mixed colour (paper Eq. 15) with the current parameters, recording
+/// the activations into `traces` when given.
+fn mix_forward(
+    enh: &Enhancer,
+    taps: &[MapTap],
+    c0: &[[f32; 3]],
+    out: &mut [[f32; 3]],
+    traces: Option<&mut [Trace]>,
+) {
+    let job = |(o, (t, c)): (&mut [[f32; 3]], (&[MapTap], Colors)),
+               mut trace: Option<&mut Trace>| {
         let mut s = MixScratch::new(enh);
-        for (o, (t, c)) in o.iter_mut().zip(t.iter().zip(c)) {
+        for (g, (o, (t, c))) in o.iter_mut().zip(t.iter().zip(c)).enumerate() {
             *o = s.mix(enh, t, *c);
+            if let Some(tr) = trace.as_deref_mut() {
+                s.record(enh, g, tr);
+            }
         }
     };
     #[cfg(feature = "parallel")]
     {
         use rayon::prelude::*;
-        out.par_chunks_mut(CHUNK)
-            .zip(taps.par_chunks(CHUNK).zip(c0.par_chunks(CHUNK)))
-            .for_each(job);
+        let chunks = out
+            .par_chunks_mut(CHUNK)
+            .zip(taps.par_chunks(CHUNK).zip(c0.par_chunks(CHUNK)));
+        match traces {
+            Some(tr) => chunks
+                .zip(tr.par_iter_mut())
+                .for_each(|(item, trace)| job(item, Some(trace))),
+            None => chunks.for_each(|item| job(item, None)),
+        }
     }
     #[cfg(not(feature = "parallel"))]
-    out.chunks_mut(CHUNK)
-        .zip(taps.chunks(CHUNK).zip(c0.chunks(CHUNK)))
-        .for_each(job);
+    {
+        let mut traces = traces.map(|t| t.iter_mut());
+        for item in out
+            .chunks_mut(CHUNK)
+            .zip(taps.chunks(CHUNK).zip(c0.chunks(CHUNK)))
+        {
+            job(item, traces.as_mut().and_then(|t| t.next()));
+        }
+    }
 }
 
 /// Gradients of the operators' parameters (added to `g_params`) and of the map logits
-/// (added to `g_map`) from the gradients `g_col` of the mixed colours.
+/// (added to `g_map`) from the gradients `g_col` of the mixed colours, with the
+/// activations [`mix_forward`] recorded in `traces` (or evaluated again without them).
 fn mix_backward(
     enh: &Enhancer,
     taps: &[MapTap],
     c0: &[[f32; 3]],
     g_col: &[[f32; 3]],
+    traces: Option<&[Trace]>,
     g_map: &mut [f32],
     g_params: &mut [f32],
 ) {
     let (map_len, params_len) = (g_map.len(), g_params.len());
-    let job = |(t, (c, g)): (&[MapTap], (Colors, Colors))| {
+    let job = |(i, (t, (c, g))): (usize, (&[MapTap], (Colors, Colors)))| {
+        let trace = traces.map(|tr| &tr[i]);
         let mut s = MixScratch::new(enh);
         let mut gm = vec![0.0f32; map_len];
         let mut gp = vec![0.0f32; params_len];
-        for (t, (c, g)) in t.iter().zip(c.iter().zip(g)) {
-            s.backward(enh, t, *c, *g, &mut gm, &mut gp);
+        for (k, (t, (c, g))) in t.iter().zip(c.iter().zip(g)).enumerate() {
+            s.backward(enh, t, *c, *g, trace.map(|tr| (tr, k)), &mut gm, &mut gp);
         }
         (gm, gp)
     };
@@ -537,6 +612,7 @@ fn mix_backward(
         let parts: Vec<_> = taps
             .par_chunks(CHUNK)
             .zip(c0.par_chunks(CHUNK).zip(g_col.par_chunks(CHUNK)))
+            .enumerate()
             .map(job)
             .collect();
         for p in parts {
@@ -547,6 +623,7 @@ fn mix_backward(
     for p in taps
         .chunks(CHUNK)
         .zip(c0.chunks(CHUNK).zip(g_col.chunks(CHUNK)))
+        .enumerate()
     {
         add(job(p), g_map, g_params);
     }
@@ -557,26 +634,42 @@ struct MixScratch {
     w: Vec<f32>,
     h1: Vec<f32>,
     h2: Vec<f32>,
+    /// Per operator, the pre-activations and unclamped output of the last [`MixScratch::mix`].
+    h1s: Vec<f32>,
+    h2s: Vec<f32>,
+    raws: Vec<[f32; 3]>,
     g_w: Vec<f32>,
+    g1: Vec<f32>,
     g2: Vec<f32>,
 }
 
 impl MixScratch {
     fn new(e: &Enhancer) -> Self {
+        let ops = e.experts - 1;
         MixScratch {
             w: vec![0.0; e.experts],
             h1: vec![0.0; e.hidden],
             h2: vec![0.0; e.hidden],
+            h1s: vec![0.0; ops * e.hidden],
+            h2s: vec![0.0; ops * e.hidden],
+            raws: vec![[0.0; 3]; ops],
             g_w: vec![0.0; e.experts],
+            g1: vec![0.0; e.hidden],
             g2: vec![0.0; e.hidden],
         }
     }
 
     fn mix(&mut self, e: &Enhancer, t: &MapTap, c: [f32; 3]) -> [f32; 3] {
+        let h = e.hidden;
         e.weights_at(t, &mut self.w);
         let mut out = c.map(|x| x * self.w[0]);
         for op in 1..e.experts {
-            let (y, _) = e.operator(op, c, &mut self.h1, &mut self.h2);
+            let (h1, h2) = (
+                &mut self.h1s[(op - 1) * h..][..h],
+                &mut self.h2s[(op - 1) * h..][..h],
+            );
+            let (y, raw) = e.operator(op, c, h1, h2);
+            self.raws[op - 1] = raw;
             for (o, y) in out.iter_mut().zip(y) {
                 *o += self.w[op] * y;
             }
@@ -584,12 +677,26 @@ impl MixScratch {
         out
     }
 
+    /// Copy the activations of the last [`MixScratch::mix`] into Gaussian `g` of `trace`.
+    fn record(&self, e: &Enhancer, g: usize, trace: &mut Trace) {
+        let (k, ops) = (e.experts, e.experts - 1);
+        let hs = ops * e.hidden;
+        trace.w[g * k..][..k].copy_from_slice(&self.w);
+        trace.h1[g * hs..][..hs].copy_from_slice(&self.h1s);
+        trace.h2[g * hs..][..hs].copy_from_slice(&self.h2s);
+        trace.raw[g * ops..][..ops].copy_from_slice(&self.raws);
+    }
+
+    /// Add one Gaussian's gradients; `trace`, when given, holds its activations
+    /// (Gaussian `.1` of the chunk's trace `.0`).
+    #[allow(clippy::too_many_arguments)]
     fn backward(
         &mut self,
         e: &Enhancer,
         t: &MapTap,
         c: [f32; 3],
         g: [f32; 3],
+        trace: Option<(&Trace, usize)>,
         g_map: &mut [f32],
         g_params: &mut [f32],
     ) {
@@ -597,13 +704,27 @@ impl MixScratch {
             return;
         }
         let (k, h) = (e.experts, e.hidden);
+        let ops = k - 1;
         let per = Enhancer::params_per_operator(h);
-        e.weights_at(t, &mut self.w);
+        match trace {
+            Some((tr, i)) => self.w.copy_from_slice(&tr.w[i * k..][..k]),
+            None => e.weights_at(t, &mut self.w),
+        }
+        let [lo, hi] = e.clamp;
         self.g_w[0] = dot(g, c);
         for op in 1..k {
-            let (y, raw) = e.operator(op, c, &mut self.h1, &mut self.h2);
+            let raw = match trace {
+                Some((tr, i)) => {
+                    let at = (i * ops + op - 1) * h;
+                    self.h1.copy_from_slice(&tr.h1[at..][..h]);
+                    self.h2.copy_from_slice(&tr.h2[at..][..h]);
+                    tr.raw[i * ops + op - 1]
+                }
+                None => e.operator(op, c, &mut self.h1, &mut self.h2).1,
+            };
+            // The operator's output, as `Enhancer::operator` clamps it.
+            let y = raw.map(|x| x.max(lo).min(hi));
             self.g_w[op] = dot(g, y);
-            let [lo, hi] = e.clamp;
             // d out / d η = w·c·exp(η) = w·raw where no clamp is active.
             let gy: [f32; 3] = std::array::from_fn(|o| {
                 if raw[o] > lo && raw[o] < hi && eta_free(raw[o], c[o]) {
@@ -625,36 +746,34 @@ impl MixScratch {
             let (gw2, gr) = gr.split_at_mut(h * h);
             let (gb2, gr) = gr.split_at_mut(h);
             let (gw3, gb3) = gr.split_at_mut(h);
+            // Branch-free, so that the loops over the hidden units vectorize: an
+            // inactive unit contributes an exact 0 rather than being skipped.
             gb3[0] += g_eta;
             for j in 0..h {
-                gw3[j] += g_eta * self.h2[j].max(0.0);
-                self.g2[j] = g_eta * w3[j];
+                let a = self.h2[j];
+                gw3[j] += g_eta * a.max(0.0);
+                self.g2[j] = if a > 0.0 { g_eta * w3[j] } else { 0.0 };
             }
+            // g1 = W2ᵀ g2, accumulated over j in order for every l at once.
+            self.g1.fill(0.0);
             for j in 0..h {
-                if self.h2[j] <= 0.0 {
-                    self.g2[j] = 0.0;
+                let gj = self.g2[j];
+                for (g1, w) in self.g1.iter_mut().zip(&w2[j * h..][..h]) {
+                    *g1 += gj * w;
                 }
             }
             for l in 0..h {
-                if self.h1[l] <= 0.0 {
-                    continue;
-                }
-                let mut g1 = 0.0;
-                for j in 0..h {
-                    g1 += self.g2[j] * w2[j * h + l];
-                }
+                let g1 = if self.h1[l] > 0.0 { self.g1[l] } else { 0.0 };
                 gb1[l] += g1;
                 for (ci, cv) in c.iter().enumerate() {
                     gw1[l * 3 + ci] += g1 * cv;
                 }
             }
             for j in 0..h {
-                if self.g2[j] == 0.0 {
-                    continue;
-                }
-                gb2[j] += self.g2[j];
-                for l in 0..h {
-                    gw2[j * h + l] += self.g2[j] * self.h1[l].max(0.0);
+                let gj = self.g2[j];
+                gb2[j] += gj;
+                for (gw, a) in gw2[j * h..][..h].iter_mut().zip(&self.h1) {
+                    *gw += gj * a.max(0.0);
                 }
             }
         }
@@ -696,6 +815,27 @@ mod tests {
             experts: opts.experts,
             hidden: opts.hidden,
         }
+    }
+
+    /// The backward pass from the recorded activations equals the one that evaluates the
+    /// operators again (what sets past [`TRACE_BYTES_MAX`] use), bit for bit.
+    #[test]
+    fn traced_and_recomputed_gradients_agree() {
+        let scene = random_scene(6, SceneSpec::new(60, 40, 1300, Blend::Sum));
+        let opts = EnhanceOptions::default();
+        let bank = super::super::features::FeatureBank;
+        let mut session = Session::new(&scene, &opts, &bank);
+        let mut rng = SplitMix64::new(9);
+        for t in session.theta.iter_mut() {
+            *t += rng.range(-0.2, 0.2);
+        }
+        assert!(session.traces.as_ref().is_some_and(|t| t.len() == 3));
+        session.loss_and_grad();
+        let traced = session.grad.clone();
+        session.traces = None;
+        session.loss_and_grad();
+        assert_eq!(traced, session.grad);
+        assert!(traced.iter().any(|g| *g != 0.0));
     }
 
     #[test]

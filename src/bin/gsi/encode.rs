@@ -36,9 +36,9 @@ pub struct Args {
     /// Eq. 9 with λ = 0.2.
     #[arg(long, value_enum, default_value_t = LossArg::L2)]
     loss: LossArg,
-    /// Where each optimizer step's render and gradients run: `auto` uses a hardware GPU
-    /// when there is one, `gpu` any adapter (software ones included), `cpu` the CPU.
-    /// Initialization, colour solves and pruning run on the CPU either way.
+    /// Where the optimizer steps run: `auto` uses a hardware GPU when there is one, `gpu`
+    /// any adapter (software ones included), `cpu` the CPU. Initialization, colour solves,
+    /// pruning and the final measurement run on the CPU either way.
     #[arg(long, value_enum, default_value_t = DeviceArg::Auto)]
     device: DeviceArg,
     /// Seed of every random choice; the same seed and thread count give the same file.
