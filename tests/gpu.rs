@@ -423,3 +423,82 @@ fn a_resident_scene_survives_degenerate_gaussians() {
         }
     }
 }
+
+/// `gsi enhance --device gpu` (the mixture on the GPU) writes a file that decodes as the
+/// CPU's does; with no such adapter it fails and leaves the file as it was.
+#[cfg(feature = "cli")]
+#[test]
+fn cli_enhance_on_the_gpu() {
+    use gsi::format::{to_bytes, BitDepths, Records, WriteOptions};
+    let Some(_) = gpu() else { return };
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("gpu-enhance");
+    let xdg = dir.join("xdg");
+    std::fs::create_dir_all(&xdg).unwrap();
+    let mut scene = random_scene(12, SceneSpec::new(64, 48, 300, Blend::Sum));
+    for c in &mut scene.gaussians.colors {
+        *c = c.map(|x| x * 0.15);
+    }
+    let bits = BitDepths {
+        position: 12,
+        covariance: 10,
+        color: 10,
+        opacity: 8,
+    };
+    let dark = to_bytes(&Records::from_scene(&scene, bits), &WriteOptions::default()).unwrap();
+    let input = dir.join("dark.gsi");
+    std::fs::write(&input, &dark).unwrap();
+    let run = |args: &[&str], env: &[(&str, &str)]| {
+        let mut cmd = std::process::Command::new(env!("CARGO_BIN_EXE_gsi"));
+        cmd.args(args).env("XDG_RUNTIME_DIR", &xdg);
+        for (k, v) in env {
+            cmd.env(k, v);
+        }
+        cmd.output().unwrap()
+    };
+    let p = |name: &str| dir.join(name).to_str().unwrap().to_string();
+    for device in ["gpu", "cpu"] {
+        let out = run(
+            &[
+                "enhance",
+                &p("dark.gsi"),
+                "-o",
+                &p(&format!("{device}.gsi")),
+                "--iterations",
+                "40",
+                "--device",
+                device,
+                "--quiet",
+            ],
+            &[],
+        );
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let out = run(
+            &[
+                "decode",
+                &p(&format!("{device}.gsi")),
+                "-o",
+                &p(&format!("{device}.png")),
+                "--device",
+                "cpu",
+            ],
+            &[],
+        );
+        assert!(out.status.success());
+    }
+    // Enhanced, not passed over as bright enough.
+    assert_ne!(std::fs::read(dir.join("gpu.gsi")).unwrap(), dark);
+    let cmp = run(&["compare", "--json", &p("cpu.png"), &p("gpu.png")], &[]);
+    let json: serde_json::Value = serde_json::from_slice(&cmp.stdout).unwrap();
+    let psnr = json["psnr"].as_f64().unwrap_or(f64::INFINITY);
+    assert!(psnr > 45.0, "GPU and CPU enhancements differ: {psnr} dB");
+    let out = run(
+        &["enhance", &p("dark.gsi"), "--in-place", "--device", "gpu"],
+        &[("WGPU_ADAPTER_NAME", "no-such-adapter-anywhere")],
+    );
+    assert_eq!(out.status.code(), Some(1));
+    assert_eq!(std::fs::read(&input).unwrap(), dark);
+}

@@ -178,7 +178,20 @@ pub fn fit(
     backbone: &dyn Backbone,
     progress: &mut dyn FnMut(&Progress),
 ) -> Fitted {
+    fit_with(scene, opts, backbone, &mut |_| {}, progress)
+}
+
+/// [`fit`], with `setup` applied to the session before the first iteration (to move its
+/// mixture to a GPU).
+pub(crate) fn fit_with<'a>(
+    scene: &'a Scene,
+    opts: &EnhanceOptions,
+    backbone: &dyn Backbone,
+    setup: &mut dyn FnMut(&mut Session<'a>),
+    progress: &mut dyn FnMut(&Progress),
+) -> Fitted {
     let mut session = Session::new(scene, opts, backbone);
+    setup(&mut session);
     for _ in 0..opts.iterations {
         progress(&session.step());
     }
@@ -212,6 +225,9 @@ pub struct Session<'a> {
     /// The forward pass's activations, per chunk of Gaussians, for the backward pass to
     /// reuse; `None` where they would take more than [`TRACE_BYTES_MAX`].
     traces: Option<Vec<Trace>>,
+    /// Where the mixture runs, when not on the CPU ([`Session::use_gpu`]).
+    #[cfg(feature = "gpu")]
+    gpu: Option<crate::gpu::enhance::GpuMixture<'a>>,
 }
 
 impl<'a> Session<'a> {
@@ -271,6 +287,8 @@ impl<'a> Session<'a> {
             g_col: vec![[0.0; 3]; n],
             g_map: vec![0.0; cells * opts.experts],
             traces: Trace::for_chunks(n, opts.experts, opts.hidden),
+            #[cfg(feature = "gpu")]
+            gpu: None,
             a,
             low,
             feats,
@@ -301,28 +319,33 @@ impl<'a> Session<'a> {
     /// The total loss at the current parameters, with its gradient left in `self.grad`.
     fn loss_and_grad(&mut self) -> (ImageTerms, MapTerms) {
         self.refresh_enhancer();
-        let (lay, c0) = (&self.lay, &self.scene.gaussians.colors);
-        mix_forward(
-            &self.enh,
-            &self.taps,
-            c0,
-            &mut self.colors,
-            self.traces.as_deref_mut(),
-        );
+        let c0 = &self.scene.gaussians.colors;
+        if !self.mix_forward_on_gpu() {
+            mix_forward(
+                &self.enh,
+                &self.taps,
+                c0,
+                &mut self.colors,
+                self.traces.as_deref_mut(),
+            );
+        }
         self.a.render(&self.colors, &mut self.img);
         let terms = self.loss.eval_display(&mut self.img, &mut self.g_img);
         self.a.transpose(&self.g_img, &mut self.g_col);
         self.grad.fill(0.0);
         self.g_map.fill(0.0);
-        mix_backward(
-            &self.enh,
-            &self.taps,
-            c0,
-            &self.g_col,
-            self.traces.as_deref(),
-            &mut self.g_map,
-            &mut self.grad[lay.head_len()..],
-        );
+        if !self.mix_backward_on_gpu() {
+            mix_backward(
+                &self.enh,
+                &self.taps,
+                c0,
+                &self.g_col,
+                self.traces.as_deref(),
+                &mut self.g_map,
+                &mut self.grad[self.lay.head_len()..],
+            );
+        }
+        let lay = &self.lay;
         let (mw, mh) = (self.enh.map_width, self.enh.map_height);
         let map_terms = map_regularizers(
             &self.enh.map,
@@ -341,6 +364,74 @@ impl<'a> Session<'a> {
             &mut self.grad,
         );
         (terms, map_terms)
+    }
+
+    /// Run the mixture (every Gaussian's mixing weights and operators, forward and
+    /// backward: most of an iteration) on `gpu`; the render, the loss and the head stay
+    /// on the CPU. Fails, leaving the session on the CPU, when the adapter cannot hold
+    /// it. Should the GPU fail later, the session says so once and goes on on the CPU.
+    #[cfg(feature = "gpu")]
+    pub fn use_gpu(&mut self, gpu: &'a crate::gpu::Gpu) -> crate::format::Result<()> {
+        let e = &self.enh;
+        self.gpu = Some(crate::gpu::enhance::GpuMixture::new(
+            gpu,
+            e.experts,
+            e.hidden,
+            e.clamp,
+            e.map.len(),
+            CHUNK,
+            &self.taps,
+            &self.scene.gaussians.colors,
+        )?);
+        Ok(())
+    }
+
+    /// [`mix_forward`] on the GPU; false where there is none, or it failed.
+    fn mix_forward_on_gpu(&mut self) -> bool {
+        #[cfg(feature = "gpu")]
+        if let Some(g) = &self.gpu {
+            match g.forward(&self.enh.map, &self.enh.params, &mut self.colors) {
+                Ok(()) => return true,
+                Err(e) => self.gpu_failed(&e),
+            }
+        }
+        false
+    }
+
+    /// [`mix_backward`] on the GPU; false where there is none, or it failed (in which
+    /// case the CPU's forward pass runs again, for the activations it needs).
+    fn mix_backward_on_gpu(&mut self) -> bool {
+        #[cfg(feature = "gpu")]
+        if let Some(g) = &self.gpu {
+            let head = self.lay.head_len();
+            match g.backward(
+                &self.g_col,
+                &self.taps,
+                &mut self.g_map,
+                &mut self.grad[head..],
+            ) {
+                Ok(()) => return true,
+                Err(e) => {
+                    self.gpu_failed(&e);
+                    self.g_map.fill(0.0);
+                    self.grad.fill(0.0);
+                    mix_forward(
+                        &self.enh,
+                        &self.taps,
+                        &self.scene.gaussians.colors,
+                        &mut self.colors,
+                        self.traces.as_deref_mut(),
+                    );
+                }
+            }
+        }
+        false
+    }
+
+    #[cfg(feature = "gpu")]
+    fn gpu_failed(&mut self, e: &crate::format::Error) {
+        eprintln!("gsi: enhancement continues on the CPU: {e}");
+        self.gpu = None;
     }
 
     /// One Adam iteration, the step size following a cosine from the learning rate to
@@ -836,6 +927,62 @@ mod tests {
         session.loss_and_grad();
         assert_eq!(traced, session.grad);
         assert!(traced.iter().any(|g| *g != 0.0));
+    }
+
+    /// The mixture on the GPU gives the CPU's colours and gradients (to the rounding of
+    /// `exp`), and a few iterations later the same loss, both blend modes.
+    #[cfg(feature = "gpu")]
+    #[test]
+    fn the_gpu_mixture_matches_the_cpu() {
+        let Some(gpu) = crate::gpu::tests::gpu() else {
+            return;
+        };
+        let rel = |a: &[f32], b: &[f32]| {
+            let d: f64 = a.iter().zip(b).map(|(x, y)| f64::from(x - y).powi(2)).sum();
+            let n: f64 = a.iter().map(|x| f64::from(*x).powi(2)).sum();
+            (d / n.max(1e-30)).sqrt()
+        };
+        for blend in [Blend::Sum, Blend::Alpha] {
+            let mut scene = random_scene(8, SceneSpec::new(70, 50, 1300, blend));
+            for c in &mut scene.gaussians.colors {
+                *c = c.map(|x| x * 0.3);
+            }
+            let opts = EnhanceOptions {
+                iterations: 15,
+                ..EnhanceOptions::default()
+            };
+            let bank = super::super::features::FeatureBank;
+            let mut cpu = Session::new(&scene, &opts, &bank);
+            let mut rng = SplitMix64::new(3);
+            for t in cpu.theta.iter_mut() {
+                *t += rng.range(-0.2, 0.2);
+            }
+            let mut on_gpu = Session::new(&scene, &opts, &bank);
+            on_gpu.theta.clone_from(&cpu.theta);
+            on_gpu.use_gpu(&gpu).unwrap();
+            cpu.loss_and_grad();
+            on_gpu.loss_and_grad();
+            let flat = |c: &[[f32; 3]]| c.iter().flatten().copied().collect::<Vec<f32>>();
+            let head = cpu.lay.head_len();
+            let errors = [
+                ("colours", rel(&flat(&cpu.colors), &flat(&on_gpu.colors))),
+                ("map", rel(&cpu.g_map, &on_gpu.g_map)),
+                ("head", rel(&cpu.grad[..head], &on_gpu.grad[..head])),
+                ("operators", rel(&cpu.grad[head..], &on_gpu.grad[head..])),
+            ];
+            for (name, e) in errors {
+                eprintln!("{blend:?} {name}: relative error {e:.2e}");
+                assert!(e <= 1e-4, "{blend:?} {name}: relative error {e}");
+            }
+            assert!(on_gpu.gpu.is_some(), "the GPU failed");
+            let (mut a, mut b) = (0.0, 0.0);
+            for _ in 0..opts.iterations {
+                a = cpu.step().terms.total;
+                b = on_gpu.step().terms.total;
+            }
+            eprintln!("{blend:?} after {} iterations: {a} vs {b}", opts.iterations);
+            assert!(((a - b) / a).abs() < 1e-3, "{blend:?}: {a} vs {b}");
+        }
     }
 
     #[test]

@@ -90,7 +90,46 @@ pub fn enhance(
     progress: &mut dyn FnMut(&fit::Progress),
 ) -> Result<(Vec<u8>, fit::Fitted)> {
     let base = base_records(file, limits)?;
-    let fitted = fit::fit(&base.to_scene(), opts, &features::FeatureBank, progress);
+    let scene = base.to_scene();
+    let fitted = fit::fit(&scene, opts, &features::FeatureBank, progress);
+    rewrite(file, &base, fitted, keep_original)
+}
+
+/// [`enhance`] with the mixture on `gpu` ([`fit::Session::use_gpu`]); where the adapter
+/// cannot hold it, says so and runs on the CPU.
+#[cfg(all(feature = "encode", feature = "gpu"))]
+pub fn enhance_on_gpu(
+    file: &ChunkedFile,
+    opts: &fit::EnhanceOptions,
+    keep_original: bool,
+    limits: &Limits,
+    gpu: &crate::gpu::Gpu,
+    progress: &mut dyn FnMut(&fit::Progress),
+) -> Result<(Vec<u8>, fit::Fitted)> {
+    let base = base_records(file, limits)?;
+    let scene = base.to_scene();
+    let fitted = fit::fit_with(
+        &scene,
+        opts,
+        &features::FeatureBank,
+        &mut |s| {
+            if let Err(e) = s.use_gpu(gpu) {
+                eprintln!("gsi: enhancement runs on the CPU: {e}");
+            }
+        },
+        progress,
+    );
+    rewrite(file, &base, fitted, keep_original)
+}
+
+/// The file with the fitted colours and enhancer in place of the base colours.
+#[cfg(feature = "encode")]
+fn rewrite(
+    file: &ChunkedFile,
+    base: &Records,
+    fitted: fit::Fitted,
+    keep_original: bool,
+) -> Result<(Vec<u8>, fit::Fitted)> {
     let attr = colors_like(&fitted.colors, &base.colors);
     let bytes = file.with_colors(
         &attr,

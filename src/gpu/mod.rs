@@ -78,6 +78,7 @@ pub(crate) fn with_contract(parts: &[&str]) -> String {
     source
 }
 
+pub mod enhance;
 pub mod fit;
 mod forward;
 mod sort;
@@ -114,6 +115,8 @@ pub struct Gpu {
     max_groups: u32,
     /// The fitting loop's pipelines, built when a fit first needs them.
     fit: std::sync::OnceLock<fit::FitKernels>,
+    /// Stage 2's pipelines, likewise.
+    enhance: std::sync::OnceLock<enhance::EnhanceKernels>,
 }
 
 /// Uniform block of the shader (`Params` in `render.wgsl`).
@@ -186,6 +189,7 @@ impl Gpu {
             max_binding,
             max_groups: limits.max_compute_workgroups_per_dimension,
             fit: std::sync::OnceLock::new(),
+            enhance: std::sync::OnceLock::new(),
         })
     }
 
@@ -515,6 +519,12 @@ impl Gpu {
             Blend::Sum => &self.backward_sum,
             Blend::Alpha => &self.backward_alpha,
         }
+    }
+
+    /// Stage 2's pipelines, built on first use.
+    pub(crate) fn enhance_kernels(&self) -> &enhance::EnhanceKernels {
+        self.enhance
+            .get_or_init(|| enhance::EnhanceKernels::new(&self.device))
     }
 
     /// The fitting loop's pipelines, built on first use.

@@ -35,7 +35,9 @@ pub struct Args {
     /// Loss weights λ1..λ7 (exposure, hue, spatial, colour, contrast, TV, entropy), comma-separated.
     #[arg(long, value_name = "L1,..,L7", value_delimiter = ',')]
     weights: Option<Vec<f32>>,
-    /// Where to fit: `auto` uses the CPU (the GPU path is not built yet).
+    /// Where the mixture (every Gaussian's operators, forward and backward) runs: `auto`
+    /// uses a hardware GPU when there is one, `gpu` any adapter (software ones included),
+    /// `cpu` the CPU. The render, the loss and the head run on the CPU either way.
     #[arg(long, value_enum, default_value_t = DeviceArg::Auto)]
     device: DeviceArg,
     /// Enhance even an image that is not low-light, or one enhanced before whose
@@ -79,11 +81,6 @@ pub fn run(args: Args) -> Result<(), Failure> {
     if args.in_place && args.input == Path::new("-") {
         return Err(Failure(
             "--in-place needs a file, not standard input".into(),
-        ));
-    }
-    if args.device == DeviceArg::Gpu {
-        return Err(Failure(
-            "--device gpu: this build has no GPU enhancement path; use --device cpu".into(),
         ));
     }
     if args.iterations == 0 {
@@ -183,8 +180,9 @@ pub fn run(args: Args) -> Result<(), Failure> {
         } else {
             bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
         }
+        let gpu = crate::device::open(args.device, "enhancing", args.quiet)?;
         let start = std::time::Instant::now();
-        let (out, fitted) = enhance::enhance(&file, &opts, keep, &limits, &mut |p| {
+        let mut progress = |p: &gsi::enhance::fit::Progress| {
             bar.set_position(u64::from(p.iteration));
             if args.verbose && (p.iteration % 50 == 0 || p.iteration == p.iterations) {
                 let (t, m) = (&p.terms, &p.map);
@@ -198,7 +196,11 @@ pub fn run(args: Args) -> Result<(), Failure> {
             if p.iteration % 10 == 0 {
                 bar.set_message(format!("loss {:.3}", p.terms.total));
             }
-        })
+        };
+        let (out, fitted) = match &gpu {
+            Some(gpu) => enhance::enhance_on_gpu(&file, &opts, keep, &limits, gpu, &mut progress),
+            None => enhance::enhance(&file, &opts, keep, &limits, &mut progress),
+        }
         .map_err(named)?;
         bar.finish_and_clear();
         say(format!(

@@ -1,0 +1,73 @@
+
+// Shared by the kernels of stage 2's mixture on the GPU (`src/gpu/enhance.rs`); the host
+// prepends it. They evaluate what `enhance::fit` evaluates per Gaussian: the mixing
+// weights from the map, the K - 1 operator MLPs, and their backward pass. The image
+// side of an iteration (the render A·c, the loss, Aᵀ) stays on the CPU.
+//
+// A Gaussian's record in `gauss` is GAUSS u32s: the four map cells of its tap, their
+// four weights and its colour (f32 bits), and one unused word.
+const GAUSS: u32 = 12u;
+// Largest K and hidden width (`format::MAX_EXPERTS`; the hidden width is checked by the
+// host): the private arrays' length.
+const WIDTH_MAX: u32 = 64u;
+
+struct Mix {
+    // Gaussians.
+    count: u32,
+    // K, operator 0 being the identity.
+    experts: u32,
+    hidden: u32,
+    // Parameters of one operator: W1 (3h), b1 (h), W2 (h²), b2 (h), W3 (h), b3 (1).
+    per: u32,
+    // The operators' output clamp.
+    lo: f32,
+    hi: f32,
+    // `GAIN_LOG_MAX` and its exponential, as the CPU computes it.
+    gain_log_max: f32,
+    gain_max: f32,
+    // Gaussians per partial sum (`enhance::fit::CHUNK`).
+    chunk: u32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
+}
+
+@group(0) @binding(0) var<uniform> mix: Mix;
+
+fn color0(g: u32) -> vec3<f32> {
+    let b = GAUSS * g + 8u;
+    return vec3<f32>(bitcast<f32>(gauss[b]), bitcast<f32>(gauss[b + 1u]), bitcast<f32>(gauss[b + 2u]));
+}
+
+// Where the forward pass leaves a Gaussian's activations in `trace`: the K mixing
+// weights of every Gaussian, then the two hidden layers' pre-activations of every
+// (Gaussian, operator), then the unclamped outputs (3 each).
+fn trace_w(g: u32) -> u32 {
+    return g * mix.experts;
+}
+fn trace_h1(g: u32, op: u32) -> u32 {
+    return mix.count * mix.experts + (g * (mix.experts - 1u) + op - 1u) * mix.hidden;
+}
+fn trace_h2(g: u32, op: u32) -> u32 {
+    return trace_h1(g, op) + mix.count * (mix.experts - 1u) * mix.hidden;
+}
+fn trace_raw(g: u32, op: u32) -> u32 {
+    return mix.count * (mix.experts + 2u * (mix.experts - 1u) * mix.hidden)
+        + (g * (mix.experts - 1u) + op - 1u) * 3u;
+}
+
+// Where the per-Gaussian backward pass leaves, per (Gaussian, operator), the gradient of
+// the log-gain η and of the two hidden layers' pre-activations, in `back`.
+fn back_eta(g: u32, op: u32) -> u32 {
+    return g * (mix.experts - 1u) + op - 1u;
+}
+fn back_g1(g: u32, op: u32) -> u32 {
+    return mix.count * (mix.experts - 1u) + (g * (mix.experts - 1u) + op - 1u) * mix.hidden;
+}
+fn back_g2(g: u32, op: u32) -> u32 {
+    return back_g1(g, op) + mix.count * (mix.experts - 1u) * mix.hidden;
+}
+
+fn linear_id(wg: vec3<u32>, groups: vec3<u32>, lid: u32) -> u32 {
+    return (wg.y * groups.x + wg.x) * GROUP + lid;
+}

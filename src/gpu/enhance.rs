@@ -1,0 +1,296 @@
+//! Stage 2's per-Gaussian work on the GPU: the mixture's forward pass (mixing weights and
+//! the K − 1 operator MLPs for every Gaussian) and its backward pass down to the
+//! parameters' gradients.
+//!
+//! That is where `gsi enhance` spends most of an iteration on the CPU (`perf`: the
+//! operators' forward and backward passes, about two thirds). The image side (the render
+//! `A·c`, the zero-shot loss and `Aᵀ`) stays on the CPU, so an iteration moves the
+//! colours, their gradients, the logit gradients and the parameter gradients across the
+//! bus: a few hundred kilobytes for a few thousand Gaussians.
+//!
+//! Kernels (`shaders/enhance_*.wgsl`): `enhance_forward` (one invocation per Gaussian,
+//! writing the mixed colour and a trace of its activations), `enhance_backward` (per
+//! Gaussian: logit gradients, and per operator the gradients of η and of the hidden
+//! pre-activations) and `enhance_params` (one invocation per parameter, summing over the
+//! Gaussians in the CPU's chunks and order).
+
+use super::{too_big, Gpu, Kernel};
+use crate::enhance::mixture::{MapTap, GAIN_LOG_MAX};
+use crate::format::{Error, ErrorKind, Result};
+use wgpu::util::DeviceExt;
+
+/// u32 words per Gaussian in the `gauss` buffer (`GAUSS` of `enhance_common.wgsl`).
+const GAUSS: usize = 12;
+/// Largest K and hidden width the shaders' private arrays hold (`WIDTH_MAX`).
+const WIDTH_MAX: usize = 64;
+
+/// The pipelines, built the first time an enhancement runs on a device.
+pub(crate) struct EnhanceKernels {
+    forward: Kernel,
+    backward: Kernel,
+    params: Kernel,
+}
+
+impl EnhanceKernels {
+    pub(crate) fn new(device: &wgpu::Device) -> EnhanceKernels {
+        let k = |label, source: String, reads, writes| {
+            Kernel::new(device, label, &source, reads, writes)
+        };
+        EnhanceKernels {
+            forward: k(
+                "enhance_forward",
+                shader!("enhance_common", "enhance_forward"),
+                3,
+                2,
+            ),
+            backward: k(
+                "enhance_backward",
+                shader!("enhance_common", "enhance_backward"),
+                4,
+                2,
+            ),
+            params: k(
+                "enhance_params",
+                shader!("enhance_common", "enhance_params"),
+                3,
+                1,
+            ),
+        }
+    }
+}
+
+/// The uniform block `Mix` of `enhance_common.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct MixUniform {
+    count: u32,
+    experts: u32,
+    hidden: u32,
+    per: u32,
+    lo: f32,
+    hi: f32,
+    gain_log_max: f32,
+    gain_max: f32,
+    chunk: u32,
+    _pad: [u32; 3],
+}
+
+/// The mixture of one enhancement fit, resident on the GPU: the Gaussians' taps and
+/// colours, uploaded once, and the buffers every iteration reuses.
+pub struct GpuMixture<'g> {
+    gpu: &'g Gpu,
+    count: usize,
+    experts: usize,
+    params_len: usize,
+    logits_len: usize,
+    chunk: usize,
+    params: wgpu::Buffer,
+    logits: wgpu::Buffer,
+    colors: wgpu::Buffer,
+    g_col: wgpu::Buffer,
+    g_logits: wgpu::Buffer,
+    g_params: wgpu::Buffer,
+    forward: wgpu::BindGroup,
+    backward: wgpu::BindGroup,
+    sums: wgpu::BindGroup,
+    gaussian_groups: (u32, u32),
+    param_groups: (u32, u32),
+}
+
+impl<'g> GpuMixture<'g> {
+    /// Upload the Gaussians (`taps` into a logit map of `logits_len / experts` cells, and
+    /// their original colours `c0`) for a mixture of `experts` operators of `hidden`
+    /// units with outputs clamped to `clamp`, whose backward pass sums over `chunk`
+    /// Gaussians at a time. Fails when the buffers exceed what the adapter can bind.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        gpu: &'g Gpu,
+        experts: usize,
+        hidden: usize,
+        clamp: [f32; 2],
+        logits_len: usize,
+        chunk: usize,
+        taps: &[MapTap],
+        c0: &[[f32; 3]],
+    ) -> Result<GpuMixture<'g>> {
+        let count = c0.len();
+        if !(1..=WIDTH_MAX).contains(&experts)
+            || !(1..=WIDTH_MAX).contains(&hidden)
+            || taps.len() != count
+            || count == 0
+            || chunk == 0
+            || logits_len % experts != 0
+            || taps
+                .iter()
+                .any(|t| t.cells.iter().any(|&c| c as usize * experts >= logits_len))
+        {
+            return Err(Error::new(
+                ErrorKind::InvalidValue,
+                "a GPU mixture needs matching taps and colours, 1..=64 experts and hidden units",
+            ));
+        }
+        let ops = experts - 1;
+        let per = crate::enhance::mixture::Enhancer::params_per_operator(hidden);
+        let params_len = ops * per;
+        // Trace: K weights, then 2h pre-activations and 3 outputs per operator.
+        let trace_len = count as u64 * (experts + ops * (2 * hidden + 3)) as u64;
+        let back_len = count as u64 * (ops * (2 * hidden + 1)) as u64;
+        for floats in [trace_len, back_len, count as u64 * experts as u64] {
+            if floats * 4 > gpu.max_binding || floats > u64::from(u32::MAX) {
+                return Err(too_big(&gpu.info, "this enhancement's mixture"));
+            }
+        }
+        let uniform = MixUniform {
+            count: count as u32,
+            experts: experts as u32,
+            hidden: hidden as u32,
+            per: per as u32,
+            lo: clamp[0],
+            hi: clamp[1],
+            gain_log_max: GAIN_LOG_MAX,
+            gain_max: GAIN_LOG_MAX.exp(),
+            chunk: chunk as u32,
+            _pad: [0; 3],
+        };
+        let mut gauss = vec![0u32; count * GAUSS];
+        for ((rec, t), c) in gauss.chunks_exact_mut(GAUSS).zip(taps).zip(c0) {
+            rec[..4].copy_from_slice(&t.cells);
+            for i in 0..4 {
+                rec[4 + i] = t.weights[i].to_bits();
+            }
+            for i in 0..3 {
+                rec[8 + i] = c[i].to_bits();
+            }
+        }
+        let device = &gpu.device;
+        let k = gpu.enhance_kernels();
+        let mix = gpu.uniform_buffer(bytemuck::bytes_of(&uniform));
+        let gauss = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: None,
+            contents: bytemuck::cast_slice(&gauss),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+        let params = gpu.zeroed(params_len as u64 * 4);
+        let logits = gpu.zeroed(logits_len as u64 * 4);
+        let colors = gpu.zeroed(count as u64 * 12);
+        let trace = gpu.zeroed(trace_len * 4);
+        let g_col = gpu.zeroed(count as u64 * 12);
+        let g_logits = gpu.zeroed(count as u64 * experts as u64 * 4);
+        let back = gpu.zeroed(back_len * 4);
+        let g_params = gpu.zeroed(params_len as u64 * 4);
+        Ok(GpuMixture {
+            forward: k
+                .forward
+                .bind(device, &[&mix, &params, &logits, &gauss, &colors, &trace]),
+            backward: k.backward.bind(
+                device,
+                &[&mix, &params, &gauss, &trace, &g_col, &g_logits, &back],
+            ),
+            sums: k
+                .params
+                .bind(device, &[&mix, &gauss, &trace, &back, &g_params]),
+            gaussian_groups: gpu.groups(count as u64)?,
+            param_groups: gpu.groups(params_len as u64)?,
+            gpu,
+            count,
+            experts,
+            params_len,
+            logits_len,
+            chunk,
+            params,
+            logits,
+            colors,
+            g_col,
+            g_logits,
+            g_params,
+        })
+    }
+
+    /// Every Gaussian's mixed colour for the logit map `logits` and operator parameters
+    /// `params` (the layouts of `enhance::mixture::Enhancer`), into `out`.
+    pub fn forward(&self, logits: &[f32], params: &[f32], out: &mut [[f32; 3]]) -> Result<()> {
+        assert_eq!(logits.len(), self.logits_len);
+        assert_eq!(params.len(), self.params_len);
+        assert_eq!(out.len(), self.count);
+        let gpu = self.gpu;
+        gpu.queue
+            .write_buffer(&self.logits, 0, bytemuck::cast_slice(logits));
+        if !params.is_empty() {
+            gpu.queue
+                .write_buffer(&self.params, 0, bytemuck::cast_slice(params));
+        }
+        let mut enc = gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        {
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
+            gpu.enhance_kernels()
+                .forward
+                .dispatch(&mut pass, &self.forward, self.gaussian_groups);
+        }
+        let [colors] = gpu.read_back(enc, [&self.colors])?;
+        let colors: &[f32] = bytemuck::cast_slice(&colors);
+        for (o, c) in out.iter_mut().zip(colors.chunks_exact(3)) {
+            *o = [c[0], c[1], c[2]];
+        }
+        Ok(())
+    }
+
+    /// The backward pass of the last [`GpuMixture::forward`] from the colour gradients
+    /// `g_col`: adds the logit map's gradient to `g_map` (through `taps`, the ones given
+    /// to [`GpuMixture::new`]) and the parameters' to `g_params`, summed in the CPU's
+    /// chunks and order.
+    pub fn backward(
+        &self,
+        g_col: &[[f32; 3]],
+        taps: &[MapTap],
+        g_map: &mut [f32],
+        g_params: &mut [f32],
+    ) -> Result<()> {
+        assert_eq!(g_col.len(), self.count);
+        assert_eq!(g_map.len(), self.logits_len);
+        assert_eq!(g_params.len(), self.params_len);
+        let gpu = self.gpu;
+        gpu.queue
+            .write_buffer(&self.g_col, 0, bytemuck::cast_slice(g_col));
+        let mut enc = gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        {
+            let k = gpu.enhance_kernels();
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
+            k.backward
+                .dispatch(&mut pass, &self.backward, self.gaussian_groups);
+            if self.params_len > 0 {
+                k.params.dispatch(&mut pass, &self.sums, self.param_groups);
+            }
+        }
+        let [g_logits, sums] = gpu.read_back(enc, [&self.g_logits, &self.g_params])?;
+        let g_logits: &[f32] = bytemuck::cast_slice(&g_logits);
+        let sums: &[f32] = bytemuck::cast_slice(&sums);
+        for (g, s) in g_params.iter_mut().zip(sums) {
+            *g += s;
+        }
+        // Spread each Gaussian's logit gradient over its tap's cells, chunk by chunk as
+        // the CPU pass does.
+        let k = self.experts;
+        let mut part = vec![0.0f32; g_map.len()];
+        for (taps, gl) in taps.chunks(self.chunk).zip(g_logits.chunks(self.chunk * k)) {
+            part.fill(0.0);
+            for (t, gl) in taps.iter().zip(gl.chunks_exact(k)) {
+                for (&cell, &b) in t.cells.iter().zip(&t.weights) {
+                    if b == 0.0 {
+                        continue;
+                    }
+                    for (p, &x) in part[cell as usize * k..][..k].iter_mut().zip(gl) {
+                        *p += b * x;
+                    }
+                }
+            }
+            for (g, p) in g_map.iter_mut().zip(&part) {
+                *g += p;
+            }
+        }
+        Ok(())
+    }
+}
