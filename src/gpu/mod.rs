@@ -10,6 +10,9 @@
 //! - [`fit::ResidentFit`] is stage 1's whole optimizer step on the GPU (projection,
 //!   deterministic binning by a stable radix sort, render, L2 loss, backward, chain rule,
 //!   Adam), reading back only progress reports. [`crate::fit::Fitter::use_gpu`] uses it.
+//! - [`GpuScene`] draws a decoded scene again and again with that pipeline's forward half.
+//! - [`enhance::GpuMixture`] is stage 2's per-Gaussian work (the mixture's weights and
+//!   operators, forward and backward); [`crate::enhance::fit::Session::use_gpu`] uses it.
 //!
 //! The adapter is headless (no surface) and honours wgpu's environment variables:
 //! `WGPU_BACKEND` (e.g. `vulkan`), `WGPU_ADAPTER_NAME` (a substring of the adapter's
