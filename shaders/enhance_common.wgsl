@@ -5,11 +5,9 @@
 // side of an iteration (the render A·c, the loss, Aᵀ) stays on the CPU.
 //
 // A Gaussian's record in `gauss` is GAUSS u32s: the four map cells of its tap, their
-// four weights and its colour (f32 bits), and one unused word.
-const GAUSS: u32 = 12u;
-// Largest K and hidden width (`format::MAX_EXPERTS`; the hidden width is checked by the
-// host): the private arrays' length.
-const WIDTH_MAX: u32 = 64u;
+// four weights and its colour (f32 bits), and one unused word. GAUSS, and WIDTH_MAX (the
+// largest K and hidden width, the private arrays' length), come with the contract
+// constants, from the host's own.
 
 struct Mix {
     // Gaussians.
@@ -32,7 +30,7 @@ struct Mix {
     _pad2: u32,
 }
 
-@group(0) @binding(0) var<uniform> mix: Mix;
+@group(0) @binding(0) var<uniform> shape: Mix;
 
 fn color0(g: u32) -> vec3<f32> {
     let b = GAUSS * g + 8u;
@@ -43,29 +41,29 @@ fn color0(g: u32) -> vec3<f32> {
 // weights of every Gaussian, then the two hidden layers' pre-activations of every
 // (Gaussian, operator), then the unclamped outputs (3 each).
 fn trace_w(g: u32) -> u32 {
-    return g * mix.experts;
+    return g * shape.experts;
 }
 fn trace_h1(g: u32, op: u32) -> u32 {
-    return mix.count * mix.experts + (g * (mix.experts - 1u) + op - 1u) * mix.hidden;
+    return shape.count * shape.experts + (g * (shape.experts - 1u) + op - 1u) * shape.hidden;
 }
 fn trace_h2(g: u32, op: u32) -> u32 {
-    return trace_h1(g, op) + mix.count * (mix.experts - 1u) * mix.hidden;
+    return trace_h1(g, op) + shape.count * (shape.experts - 1u) * shape.hidden;
 }
 fn trace_raw(g: u32, op: u32) -> u32 {
-    return mix.count * (mix.experts + 2u * (mix.experts - 1u) * mix.hidden)
-        + (g * (mix.experts - 1u) + op - 1u) * 3u;
+    return shape.count * (shape.experts + 2u * (shape.experts - 1u) * shape.hidden)
+        + (g * (shape.experts - 1u) + op - 1u) * 3u;
 }
 
 // Where the per-Gaussian backward pass leaves, per (Gaussian, operator), the gradient of
 // the log-gain η and of the two hidden layers' pre-activations, in `back`.
 fn back_eta(g: u32, op: u32) -> u32 {
-    return g * (mix.experts - 1u) + op - 1u;
+    return g * (shape.experts - 1u) + op - 1u;
 }
 fn back_g1(g: u32, op: u32) -> u32 {
-    return mix.count * (mix.experts - 1u) + (g * (mix.experts - 1u) + op - 1u) * mix.hidden;
+    return shape.count * (shape.experts - 1u) + (g * (shape.experts - 1u) + op - 1u) * shape.hidden;
 }
 fn back_g2(g: u32, op: u32) -> u32 {
-    return back_g1(g, op) + mix.count * (mix.experts - 1u) * mix.hidden;
+    return back_g1(g, op) + shape.count * (shape.experts - 1u) * shape.hidden;
 }
 
 fn linear_id(wg: vec3<u32>, groups: vec3<u32>, lid: u32) -> u32 {

@@ -1,7 +1,12 @@
-// Stage 2's mixture, forward, one invocation per Gaussian: `Enhancer::weights_at` (the
-// bilinear tap of the logit map, then a softmax) and `Enhancer::operator` for every
-// operator, mixed as `enhance::fit` mixes them, in the same order of operations. The
-// activations go to `trace` for the backward pass.
+// Stage 2's mixture, forward, in three entry points sharing these bindings:
+// - `weights`, one invocation per Gaussian: `Enhancer::weights_at` (the bilinear tap of
+//   the logit map, then a softmax);
+// - `operators`, one invocation per (Gaussian, operator): `Enhancer::operator`;
+// - `mixed`, one invocation per Gaussian: the operators' clamped outputs mixed by the
+//   weights, in `enhance::fit`'s order.
+// Splitting per operator keeps every invocation's loops short (software rasterizers such
+// as lavapipe cut an invocation off after 65535 loop iterations) and gives a GPU K − 1
+// times more invocations. The activations stay in `trace` for the backward pass.
 
 @group(0) @binding(1) var<storage, read> params: array<f32>;
 @group(0) @binding(2) var<storage, read> logits: array<f32>;
@@ -10,14 +15,13 @@
 @group(0) @binding(5) var<storage, read_write> trace: array<f32>;
 
 @compute @workgroup_size(GROUP, 1, 1)
-fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>,
-        @builtin(local_invocation_index) lid: u32) {
+fn weights(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>,
+           @builtin(local_invocation_index) lid: u32) {
     let g = linear_id(wg, groups, lid);
-    if (g >= mix.count) {
+    if (g >= shape.count) {
         return;
     }
-    let k_all = mix.experts;
-    let h = mix.hidden;
+    let k_all = shape.experts;
     var w: array<f32, WIDTH_MAX>;
     for (var k = 0u; k < k_all; k = k + 1u) {
         w[k] = 0.0;
@@ -40,46 +44,68 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) groups: v
         sum = sum + w[k];
     }
     for (var k = 0u; k < k_all; k = k + 1u) {
-        w[k] = w[k] / sum;
-        trace[trace_w(g) + k] = w[k];
+        trace[trace_w(g) + k] = w[k] / sum;
     }
+}
 
+@compute @workgroup_size(GROUP, 1, 1)
+fn operators(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>,
+             @builtin(local_invocation_index) lid: u32) {
+    let ops = shape.experts - 1u;
+    let id = linear_id(wg, groups, lid);
+    if (ops == 0u || id >= shape.count * ops) {
+        return;
+    }
+    let g = id / ops;
+    let op = id % ops + 1u;
+    let h = shape.hidden;
     let c = color0(g);
-    var out = c * w[0];
+    let p = (op - 1u) * shape.per;
+    let b1 = p + 3u * h;
+    let w2 = b1 + h;
+    let b2 = w2 + h * h;
+    let w3 = b2 + h;
+    let b3 = w3 + h;
+    let t1 = trace_h1(g, op);
+    let t2 = trace_h2(g, op);
     var h1: array<f32, WIDTH_MAX>;
-    for (var op = 1u; op < k_all; op = op + 1u) {
-        let p = (op - 1u) * mix.per;
-        let b1 = p + 3u * h;
-        let w2 = b1 + h;
-        let b2 = w2 + h * h;
-        let w3 = b2 + h;
-        let b3 = w3 + h;
-        let t1 = trace_h1(g, op);
-        let t2 = trace_h2(g, op);
-        for (var j = 0u; j < h; j = j + 1u) {
-            let v = params[b1 + j] + params[p + 3u * j] * c.x + params[p + 3u * j + 1u] * c.y
-                + params[p + 3u * j + 2u] * c.z;
-            h1[j] = v;
-            trace[t1 + j] = v;
+    for (var j = 0u; j < h; j = j + 1u) {
+        let v = params[b1 + j] + params[p + 3u * j] * c.x + params[p + 3u * j + 1u] * c.y
+            + params[p + 3u * j + 2u] * c.z;
+        h1[j] = v;
+        trace[t1 + j] = v;
+    }
+    var eta = 0.0;
+    for (var j = 0u; j < h; j = j + 1u) {
+        var s = 0.0;
+        for (var l = 0u; l < h; l = l + 1u) {
+            s = s + params[w2 + h * j + l] * max(h1[l], 0.0);
         }
-        var eta = 0.0;
-        for (var j = 0u; j < h; j = j + 1u) {
-            var s = 0.0;
-            for (var l = 0u; l < h; l = l + 1u) {
-                s = s + params[w2 + h * j + l] * max(h1[l], 0.0);
-            }
-            let v = params[b2 + j] + s;
-            trace[t2 + j] = v;
-            eta = eta + params[w3 + j] * max(v, 0.0);
-        }
-        eta = params[b3] + eta;
-        let raw = c * exp(min(eta, mix.gain_log_max));
+        let v = params[b2 + j] + s;
+        trace[t2 + j] = v;
+        eta = eta + params[w3 + j] * max(v, 0.0);
+    }
+    eta = params[b3] + eta;
+    let raw = c * exp(min(eta, shape.gain_log_max));
+    let tr = trace_raw(g, op);
+    trace[tr] = raw.x;
+    trace[tr + 1u] = raw.y;
+    trace[tr + 2u] = raw.z;
+}
+
+@compute @workgroup_size(GROUP, 1, 1)
+fn mixed(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>,
+         @builtin(local_invocation_index) lid: u32) {
+    let g = linear_id(wg, groups, lid);
+    if (g >= shape.count) {
+        return;
+    }
+    let tw = trace_w(g);
+    var out = color0(g) * trace[tw];
+    for (var op = 1u; op < shape.experts; op = op + 1u) {
         let tr = trace_raw(g, op);
-        trace[tr] = raw.x;
-        trace[tr + 1u] = raw.y;
-        trace[tr + 2u] = raw.z;
-        let y = min(max(raw, vec3<f32>(mix.lo)), vec3<f32>(mix.hi));
-        out = out + w[op] * y;
+        let raw = vec3<f32>(trace[tr], trace[tr + 1u], trace[tr + 2u]);
+        out = out + trace[tw + op] * min(max(raw, vec3<f32>(shape.lo)), vec3<f32>(shape.hi));
     }
     colors[3u * g] = out.x;
     colors[3u * g + 1u] = out.y;

@@ -1,16 +1,17 @@
-// The gradient of every operator parameter, one invocation per parameter, summed over
-// the Gaussians as `enhance::fit` sums it: in chunks of `mix.chunk` Gaussians, each
-// chunk's sum added to the total in order. The order is fixed, so the result does not
-// depend on scheduling, and no atomics are needed.
+// The gradient of every operator parameter over one chunk of `shape.chunk` Gaussians,
+// one invocation per (chunk, parameter), summed in Gaussian order: the partial sums
+// `enhance::fit` adds per chunk. The host adds the chunks in order, so the result does
+// not depend on scheduling, and no atomics are needed.
 
 @group(0) @binding(1) var<storage, read> gauss: array<u32>;
 @group(0) @binding(2) var<storage, read> trace: array<f32>;
 @group(0) @binding(3) var<storage, read> back: array<f32>;
-@group(0) @binding(4) var<storage, read_write> g_params: array<f32>;
+// Chunk-major: chunk c's sum for parameter i at c·params + i.
+@group(0) @binding(4) var<storage, read_write> partials: array<f32>;
 
 // Gaussian g's share of the gradient of parameter q of operator op.
 fn share(g: u32, op: u32, q: u32) -> f32 {
-    let h = mix.hidden;
+    let h = shape.hidden;
     if (q < 3u * h) {
         // W1[l][ci]
         let c = color0(g);
@@ -38,20 +39,21 @@ fn share(g: u32, op: u32, q: u32) -> f32 {
 @compute @workgroup_size(GROUP, 1, 1)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>,
         @builtin(local_invocation_index) lid: u32) {
-    let i = linear_id(wg, groups, lid);
-    if (i >= (mix.experts - 1u) * mix.per) {
+    let params = (shape.experts - 1u) * shape.per;
+    let chunks = (shape.count + shape.chunk - 1u) / shape.chunk;
+    let id = linear_id(wg, groups, lid);
+    if (params == 0u || id >= chunks * params) {
         return;
     }
-    let op = i / mix.per + 1u;
-    let q = i % mix.per;
-    var total = 0.0;
-    for (var start = 0u; start < mix.count; start = start + mix.chunk) {
-        var part = 0.0;
-        let end = min(start + mix.chunk, mix.count);
-        for (var g = start; g < end; g = g + 1u) {
-            part = part + share(g, op, q);
-        }
-        total = total + part;
+    let chunk = id / params;
+    let i = id % params;
+    let op = i / shape.per + 1u;
+    let q = i % shape.per;
+    let start = chunk * shape.chunk;
+    let end = min(start + shape.chunk, shape.count);
+    var part = 0.0;
+    for (var g = start; g < end; g = g + 1u) {
+        part = part + share(g, op, q);
     }
-    g_params[i] = total;
+    partials[id] = part;
 }

@@ -63,6 +63,8 @@ fn contract() -> String {
         ("STRIDE", fit::STRIDE as u32),
         ("SLOT", SLOT as u32),
         ("SORT_BLOCK", sort::BLOCK),
+        ("GAUSS", enhance::GAUSS as u32),
+        ("WIDTH_MAX", enhance::WIDTH_MAX as u32),
     ] {
         out += &format!("const {name}: u32 = {value}u;\n");
     }
@@ -553,6 +555,20 @@ impl Kernel {
         reads: u32,
         writes: u32,
     ) -> Kernel {
+        let [k] = Kernel::entries(device, label, source, ["main"], reads, writes);
+        k
+    }
+
+    /// The entry points `names` of `source`, as [`Kernel::new`] builds one, sharing one
+    /// bind group layout: a bind group made for one serves them all.
+    pub(crate) fn entries<const N: usize>(
+        device: &wgpu::Device,
+        label: &str,
+        source: &str,
+        names: [&str; N],
+        reads: u32,
+        writes: u32,
+    ) -> [Kernel; N] {
         let bindings = 1 + reads + writes;
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some(label),
@@ -585,15 +601,17 @@ impl Kernel {
             bind_group_layouts: &[Some(&layout)],
             immediate_size: 0,
         });
-        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some(label),
-            layout: Some(&pipeline_layout),
-            module: &module,
-            entry_point: Some("main"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
-        Kernel { pipeline, layout }
+        names.map(|name| Kernel {
+            pipeline: device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(label),
+                layout: Some(&pipeline_layout),
+                module: &module,
+                entry_point: Some(name),
+                compilation_options: Default::default(),
+                cache: None,
+            }),
+            layout: layout.clone(),
+        })
     }
 
     /// A bind group of `buffers`, in binding order.
