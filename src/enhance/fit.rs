@@ -842,7 +842,8 @@ impl MixScratch {
             let (gb2, gr) = gr.split_at_mut(h);
             let (gw3, gb3) = gr.split_at_mut(h);
             // Branch-free, so that the loops over the hidden units vectorize: an
-            // inactive unit contributes an exact 0 rather than being skipped.
+            // inactive unit contributes an exact 0 rather than being skipped, which sums
+            // to the same bits while the activations are finite.
             gb3[0] += g_eta;
             for j in 0..h {
                 let a = self.h2[j];
