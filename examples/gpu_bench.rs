@@ -74,10 +74,10 @@ fn main() {
         let encoded = encode_on_gpu(&landscape, &opts, &gpu, &mut |_| {}).expect("fit");
         let scene = encoded.records.to_scene();
         let resident = GpuScene::new(&gpu, &scene, 768, 512).expect("upload");
-        resident.draw(frames / 10 + 1);
+        resident.draw(frames / 10 + 1).expect("GPU");
         resident.wait().expect("GPU");
         let t = Instant::now();
-        resident.draw(frames);
+        resident.draw(frames).expect("GPU");
         resident.wait().expect("GPU");
         let fps = f64::from(frames) / t.elapsed().as_secs_f64();
         let calls = if quick { 2 } else { 50 };

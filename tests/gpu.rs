@@ -83,7 +83,7 @@ fn a_resident_scene_draws_the_cpu_pixels() {
         for (ow, oh) in [(w, h), (2 * w + 1, 2 * h), (w.div_ceil(3), h.div_ceil(3))] {
             let cpu = gsi::render::render(&scene, ow, oh).unwrap().to_rgb8();
             let resident = gsi::gpu::GpuScene::new(&gpu, &scene, ow, oh).unwrap();
-            resident.draw(2);
+            resident.draw(2).unwrap();
             let img = resident.image().unwrap();
             assert!(img.data.iter().all(|x| x.is_finite()));
             let img = img.to_rgb8();

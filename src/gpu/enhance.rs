@@ -131,6 +131,20 @@ impl<'g> GpuMixture<'g> {
         taps: &[MapTap],
         c0: &[[f32; 3]],
     ) -> Result<GpuMixture<'g>> {
+        gpu.checked(|| Self::build(gpu, experts, hidden, clamp, logits_len, chunk, taps, c0))
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn build(
+        gpu: &'g Gpu,
+        experts: usize,
+        hidden: usize,
+        clamp: [f32; 2],
+        logits_len: usize,
+        chunk: usize,
+        taps: &[MapTap],
+        c0: &[[f32; 3]],
+    ) -> Result<GpuMixture<'g>> {
         let count = c0.len();
         if count == 0 {
             return Err(Error::new(
@@ -252,6 +266,16 @@ impl<'g> GpuMixture<'g> {
         assert_eq!(logits.len(), self.logits_len);
         assert_eq!(params.len(), self.params_len);
         assert_eq!(out.len(), self.count);
+        self.gpu
+            .checked(|| self.forward_unchecked(logits, params, out))
+    }
+
+    fn forward_unchecked(
+        &self,
+        logits: &[f32],
+        params: &[f32],
+        out: &mut [[f32; 3]],
+    ) -> Result<()> {
         let gpu = self.gpu;
         gpu.queue
             .write_buffer(&self.logits, 0, bytemuck::cast_slice(logits));
@@ -304,6 +328,17 @@ impl<'g> GpuMixture<'g> {
         assert_eq!(taps.len(), self.count);
         assert_eq!(g_map.len(), self.logits_len);
         assert_eq!(g_params.len(), self.params_len);
+        self.gpu
+            .checked(|| self.backward_unchecked(g_col, taps, g_map, g_params))
+    }
+
+    fn backward_unchecked(
+        &self,
+        g_col: &[[f32; 3]],
+        taps: &[MapTap],
+        g_map: &mut [f32],
+        g_params: &mut [f32],
+    ) -> Result<()> {
         let gpu = self.gpu;
         gpu.queue
             .write_buffer(&self.g_col, 0, bytemuck::cast_slice(g_col));

@@ -190,6 +190,16 @@ impl<'g> ResidentFit<'g> {
         params: &GaussianSet,
         adam: &AdamState,
     ) -> Result<ResidentFit<'g>> {
+        gpu.checked(|| Self::build(gpu, target, blend, params, adam))
+    }
+
+    fn build(
+        gpu: &'g Gpu,
+        target: &RgbImage,
+        blend: Blend,
+        params: &GaussianSet,
+        adam: &AdamState,
+    ) -> Result<ResidentFit<'g>> {
         let (w, h) = (target.width, target.height);
         Limits::default().check_output(w, h)?;
         let count = params.len();
@@ -244,6 +254,16 @@ impl<'g> ResidentFit<'g> {
     /// and PSNR of the image this step rendered, or `None` if its tile lists overflowed
     /// (the step was skipped, and the lists grow before the next).
     pub fn step(
+        &mut self,
+        lr: &LearningRates,
+        qat: Option<BitDepths>,
+        measure: bool,
+    ) -> Result<Option<StepReport>> {
+        let gpu = self.gpu;
+        gpu.checked(|| self.step_unchecked(lr, qat, measure))
+    }
+
+    fn step_unchecked(
         &mut self,
         lr: &LearningRates,
         qat: Option<BitDepths>,
@@ -320,6 +340,10 @@ impl<'g> ResidentFit<'g> {
     /// The parameters and Adam's state as they are now, shaped as the CPU fitter keeps
     /// them.
     pub fn download(&self) -> Result<(GaussianSet, AdamState)> {
+        self.gpu.checked(|| self.download_unchecked())
+    }
+
+    fn download_unchecked(&self) -> Result<(GaussianSet, AdamState)> {
         let enc = self
             .gpu
             .device

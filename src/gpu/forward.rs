@@ -254,6 +254,10 @@ impl<'g> GpuScene<'g> {
     /// Upload `scene` for drawing at `width × height`, and draw it once to check that
     /// its tile lists fit.
     pub fn new(gpu: &'g Gpu, scene: &Scene, width: u32, height: u32) -> Result<GpuScene<'g>> {
+        gpu.checked(|| Self::build(gpu, scene, width, height))
+    }
+
+    fn build(gpu: &'g Gpu, scene: &Scene, width: u32, height: u32) -> Result<GpuScene<'g>> {
         Limits::default().check_output(width, height)?;
         let g = &scene.gaussians;
         if !g.is_consistent() || g.is_empty() || g.len() > u32::MAX as usize / 64 {
@@ -333,10 +337,13 @@ impl<'g> GpuScene<'g> {
     }
 
     /// Queue `frames` draws without waiting for them.
-    pub fn draw(&self, frames: u32) {
-        for _ in 0..frames {
-            self.gpu.queue.submit([self.frame().finish()]);
-        }
+    pub fn draw(&self, frames: u32) -> Result<()> {
+        self.gpu.checked(|| {
+            for _ in 0..frames {
+                self.gpu.queue.submit([self.frame().finish()]);
+            }
+            Ok(())
+        })
     }
 
     /// Wait until every queued draw has finished.
@@ -350,7 +357,9 @@ impl<'g> GpuScene<'g> {
 
     /// Draw once more and read the image back.
     pub fn image(&self) -> Result<RgbImage> {
-        let [bytes] = self.gpu.read_back(self.frame(), [&self.forward.image])?;
+        let [bytes] = self
+            .gpu
+            .checked(|| self.gpu.read_back(self.frame(), [&self.forward.image]))?;
         let n = self.width as usize * self.height as usize * 3;
         Ok(RgbImage {
             width: self.width,

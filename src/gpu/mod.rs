@@ -241,6 +241,16 @@ impl Gpu {
         width: u32,
         height: u32,
     ) -> Result<RgbImage> {
+        self.checked(|| self.render_unchecked(proj, blend, width, height))
+    }
+
+    fn render_unchecked(
+        &self,
+        proj: &[Projected],
+        blend: Blend,
+        width: u32,
+        height: u32,
+    ) -> Result<RgbImage> {
         Limits::default().check_output(width, height)?;
         let mut data = vec![0.0f32; width as usize * height as usize * 3];
         if proj.is_empty() {
@@ -359,6 +369,17 @@ impl Gpu {
     /// d colour (3)]`, the quantities `fit::raster::backward` returns. Each tile writes a
     /// slot per list entry and the slots are summed in tile order, as on the CPU.
     pub fn backward(
+        &self,
+        proj: &[Projected],
+        blend: Blend,
+        width: u32,
+        height: u32,
+        dl_dimage: &[f32],
+    ) -> Result<Vec<[f32; 9]>> {
+        self.checked(|| self.backward_unchecked(proj, blend, width, height, dl_dimage))
+    }
+
+    fn backward_unchecked(
         &self,
         proj: &[Projected],
         blend: Blend,
@@ -506,6 +527,36 @@ impl Gpu {
             return Err(too_big(&self.info, "this dispatch"));
         }
         Ok((g.min(max) as u32, y as u32))
+    }
+
+    /// Run `f`, turning a wgpu validation or out-of-memory error it raises into an
+    /// [`Error`], where wgpu's default is to panic. Every public entry point that
+    /// creates GPU resources or records work goes through here.
+    pub(crate) fn checked<T>(&self, f: impl FnOnce() -> Result<T>) -> Result<T> {
+        let memory = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        let validation = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let out = f();
+        let invalid = pollster::block_on(validation.pop());
+        if let Some(e) = pollster::block_on(memory.pop()).or(invalid) {
+            let kind = match e {
+                wgpu::Error::OutOfMemory { .. } => ErrorKind::LimitExceeded,
+                _ => ErrorKind::Io,
+            };
+            // The description, not `Display`, which for validation says only that; on
+            // one line.
+            let what = match &e {
+                wgpu::Error::Validation { description, .. } => description.clone(),
+                other => other.to_string(),
+            };
+            let what = what
+                .lines()
+                .map(str::trim)
+                .filter(|l| !l.is_empty() && *l != "Caused by:")
+                .collect::<Vec<_>>()
+                .join(": ");
+            return Err(Error::new(kind, format!("GPU: {what}")));
+        }
+        out
     }
 
     /// A uniform block the host may rewrite between submissions.
@@ -738,6 +789,20 @@ async fn pick_adapter(instance: &wgpu::Instance) -> std::result::Result<wgpu::Ad
 
 #[cfg(test)]
 pub(crate) mod tests {
+    /// A resource the adapter cannot make is an error, not a panic.
+    #[test]
+    fn wgpu_errors_become_errors() {
+        let Some(gpu) = gpu() else { return };
+        let e = gpu
+            .checked(|| {
+                gpu.zeroed(gpu.max_binding.saturating_mul(64).max(1 << 62));
+                Ok(())
+            })
+            .unwrap_err();
+        eprintln!("{e}");
+        assert!(gpu.checked(|| Ok(gpu.zeroed(64))).is_ok());
+    }
+
     /// A device for a test, or `None` (and a note) where there is none, unless
     /// `GSI_REQUIRE_GPU` is set, which makes that a failure, as in CI.
     pub(crate) fn gpu() -> Option<super::Gpu> {
