@@ -45,9 +45,7 @@ fn operators(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) grou
     let gy = select(vec3<f32>(0.0), trace[trace_w(g) + op] * gc * raw, live);
     let g_eta = gy.x + gy.y + gy.z;
     back[back_eta(g, op)] = g_eta;
-    let p = (op - 1u) * shape.per;
-    let w2 = p + 4u * h;
-    let w3 = w2 + h * h + h;
+    let t = tensors(op);
     let t1 = trace_h1(g, op);
     let t2 = trace_h2(g, op);
     let o1 = back_g1(g, op);
@@ -56,7 +54,7 @@ fn operators(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) grou
     for (var j = 0u; j < h; j = j + 1u) {
         var v = 0.0;
         if (trace[t2 + j] > 0.0) {
-            v = g_eta * params[w3 + j];
+            v = g_eta * params[t.w3 + j];
         }
         g2[j] = v;
         back[o2 + j] = v;
@@ -64,7 +62,7 @@ fn operators(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) grou
     for (var l = 0u; l < h; l = l + 1u) {
         var v = 0.0;
         for (var j = 0u; j < h; j = j + 1u) {
-            v = v + g2[j] * params[w2 + j * h + l];
+            v = v + g2[j] * params[t.w2 + j * h + l];
         }
         if (!(trace[t1 + l] > 0.0)) {
             v = 0.0;

@@ -32,6 +32,26 @@ struct Mix {
 
 @group(0) @binding(0) var<uniform> shape: Mix;
 
+// Where operator op's tensors start in `params` (`Enhancer::operator`'s layout).
+struct Tensors {
+    w1: u32,
+    b1: u32,
+    w2: u32,
+    b2: u32,
+    w3: u32,
+    b3: u32,
+}
+
+fn tensors(op: u32) -> Tensors {
+    let h = shape.hidden;
+    let w1 = (op - 1u) * shape.per;
+    let b1 = w1 + 3u * h;
+    let w2 = b1 + h;
+    let b2 = w2 + h * h;
+    let w3 = b2 + h;
+    return Tensors(w1, b1, w2, b2, w3, w3 + h);
+}
+
 fn color0(g: u32) -> vec3<f32> {
     let b = GAUSS * g + 8u;
     return vec3<f32>(bitcast<f32>(gauss[b]), bitcast<f32>(gauss[b + 1u]), bitcast<f32>(gauss[b + 2u]));

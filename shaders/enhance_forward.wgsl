@@ -60,18 +60,13 @@ fn operators(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) grou
     let op = id % ops + 1u;
     let h = shape.hidden;
     let c = color0(g);
-    let p = (op - 1u) * shape.per;
-    let b1 = p + 3u * h;
-    let w2 = b1 + h;
-    let b2 = w2 + h * h;
-    let w3 = b2 + h;
-    let b3 = w3 + h;
+    let t = tensors(op);
     let t1 = trace_h1(g, op);
     let t2 = trace_h2(g, op);
     var h1: array<f32, WIDTH_MAX>;
     for (var j = 0u; j < h; j = j + 1u) {
-        let v = params[b1 + j] + params[p + 3u * j] * c.x + params[p + 3u * j + 1u] * c.y
-            + params[p + 3u * j + 2u] * c.z;
+        let v = params[t.b1 + j] + params[t.w1 + 3u * j] * c.x
+            + params[t.w1 + 3u * j + 1u] * c.y + params[t.w1 + 3u * j + 2u] * c.z;
         h1[j] = v;
         trace[t1 + j] = v;
     }
@@ -79,13 +74,13 @@ fn operators(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) grou
     for (var j = 0u; j < h; j = j + 1u) {
         var s = 0.0;
         for (var l = 0u; l < h; l = l + 1u) {
-            s = s + params[w2 + h * j + l] * max(h1[l], 0.0);
+            s = s + params[t.w2 + h * j + l] * max(h1[l], 0.0);
         }
-        let v = params[b2 + j] + s;
+        let v = params[t.b2 + j] + s;
         trace[t2 + j] = v;
-        eta = eta + params[w3 + j] * max(v, 0.0);
+        eta = eta + params[t.w3 + j] * max(v, 0.0);
     }
-    eta = params[b3] + eta;
+    eta = params[t.b3] + eta;
     let raw = c * exp(min(eta, shape.gain_log_max));
     let tr = trace_raw(g, op);
     trace[tr] = raw.x;

@@ -283,9 +283,7 @@ impl<'g> GpuMixture<'g> {
             gpu.queue
                 .write_buffer(&self.params, 0, bytemuck::cast_slice(params));
         }
-        let mut enc = gpu
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        let mut enc = gpu.encoder();
         {
             let k = gpu.enhance_kernels();
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
@@ -342,9 +340,7 @@ impl<'g> GpuMixture<'g> {
         let gpu = self.gpu;
         gpu.queue
             .write_buffer(&self.g_col, 0, bytemuck::cast_slice(g_col));
-        let mut enc = gpu
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        let mut enc = gpu.encoder();
         {
             let k = gpu.enhance_kernels();
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor::default());

@@ -288,9 +288,7 @@ impl<'g> ResidentFit<'g> {
             .write_buffer(&self.forward.fit, 0, bytemuck::bytes_of(&self.uniform));
         let k = gpu.fit_kernels();
         let (f, b, l) = (&self.forward, &self.back, &self.lists);
-        let mut enc = gpu
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        let mut enc = gpu.encoder();
         f.record_binning(gpu, &l.forward, &mut enc, qat.is_some());
         {
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
@@ -344,10 +342,7 @@ impl<'g> ResidentFit<'g> {
     }
 
     fn download_unchecked(&self) -> Result<(GaussianSet, AdamState)> {
-        let enc = self
-            .gpu
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        let enc = self.gpu.encoder();
         let [params, moments] = self
             .gpu
             .read_back(enc, [&self.forward.params, &self.back.moments])?;

@@ -117,9 +117,7 @@ impl Forward {
     /// the GPU, and one number read back).
     pub(crate) fn count_entries(&self, gpu: &Gpu) -> Result<u64> {
         let k = gpu.fit_kernels();
-        let mut enc = gpu
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        let mut enc = gpu.encoder();
         {
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
             k.project
@@ -323,10 +321,7 @@ impl<'g> GpuScene<'g> {
 
     /// A frame's commands.
     fn frame(&self) -> wgpu::CommandEncoder {
-        let mut enc = self
-            .gpu
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        let mut enc = self.gpu.encoder();
         self.forward
             .record_binning(self.gpu, &self.lists, &mut enc, false);
         {

@@ -444,9 +444,7 @@ impl Gpu {
         let out_buf = self.zeroed(out.len() as u64 * 4);
         let buffers: Vec<&wgpu::Buffer> = inputs.iter().chain(std::iter::once(&out_buf)).collect();
         let bind = kernel.bind(&self.device, &buffers);
-        let mut enc = self
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        let mut enc = self.encoder();
         {
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
             kernel.dispatch(&mut pass, &bind, groups);
@@ -557,6 +555,12 @@ impl Gpu {
             return Err(Error::new(kind, format!("GPU: {what}")));
         }
         out
+    }
+
+    /// A command encoder for one submission.
+    pub(crate) fn encoder(&self) -> wgpu::CommandEncoder {
+        self.device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None })
     }
 
     /// A uniform block the host may rewrite between submissions.

@@ -224,7 +224,7 @@ mod tests {
     }
 
     fn read(gpu: &super::super::Gpu, buf: &wgpu::Buffer, len: usize) -> Vec<u32> {
-        let enc = gpu.device.create_command_encoder(&Default::default());
+        let enc = gpu.encoder();
         let [bytes] = gpu.read_back(enc, [buf]).unwrap();
         bytemuck::cast_slice::<u8, u32>(&bytes)[..len].to_vec()
     }
@@ -240,7 +240,7 @@ mod tests {
             buffer(gpu, &[count]),
         );
         let plan = SortPlan::new(gpu, sort, &kb, &vb, &cb, capacity, key_bits).unwrap();
-        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        let mut enc = gpu.encoder();
         plan.record(sort, &mut enc);
         gpu.queue.submit([enc.finish()]);
         let live = count.min(capacity) as usize;
