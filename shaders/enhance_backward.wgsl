@@ -20,21 +20,15 @@ fn color_gradient(g: u32) -> vec3<f32> {
     return vec3<f32>(g_col[3u * g], g_col[3u * g + 1u], g_col[3u * g + 2u]);
 }
 
-fn output(g: u32, op: u32) -> vec3<f32> {
-    let tr = trace_raw(g, op);
-    return vec3<f32>(trace[tr], trace[tr + 1u], trace[tr + 2u]);
-}
-
 @compute @workgroup_size(GROUP, 1, 1)
 fn operators(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>,
              @builtin(local_invocation_index) lid: u32) {
-    let ops = shape.experts - 1u;
-    let id = linear_id(wg, groups, lid);
-    if (ops == 0u || id >= shape.count * ops) {
+    let item = gaussian_and_operator(linear_id(wg, groups, lid));
+    if (item.x >= shape.count) {
         return;
     }
-    let g = id / ops;
-    let op = id % ops + 1u;
+    let g = item.x;
+    let op = item.y;
     let h = shape.hidden;
     let gc = color_gradient(g);
     let c = color0(g);
@@ -84,7 +78,7 @@ fn logits(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) groups:
     var g_w: array<f32, WIDTH_MAX>;
     g_w[0] = dot(gc, color0(g));
     for (var op = 1u; op < k_all; op = op + 1u) {
-        g_w[op] = dot(gc, min(max(output(g, op), vec3<f32>(shape.lo)), vec3<f32>(shape.hi)));
+        g_w[op] = dot(gc, clamped(output(g, op)));
     }
     // Softmax: d/d logit_k = w_k (g_w_k − Σ_j w_j g_w_j).
     var s = 0.0;

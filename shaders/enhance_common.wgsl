@@ -86,6 +86,24 @@ fn back_g2(g: u32, op: u32) -> u32 {
     return back_g1(g, op) + shape.count * (shape.experts - 1u) * shape.hidden;
 }
 
-fn linear_id(wg: vec3<u32>, groups: vec3<u32>, lid: u32) -> u32 {
-    return (wg.y * groups.x + wg.x) * GROUP + lid;
+// The (Gaussian, operator) an invocation of a per-operator kernel handles, or none
+// (x = count) past the last or when there are no operators.
+fn gaussian_and_operator(id: u32) -> vec2<u32> {
+    let ops = shape.experts - 1u;
+    if (ops == 0u || id >= shape.count * ops) {
+        return vec2<u32>(shape.count, 0u);
+    }
+    return vec2<u32>(id / ops, id % ops + 1u);
+}
+
+// Operator op's unclamped output for Gaussian g, from the trace (each kernel that reads
+// it declares `trace`).
+fn output(g: u32, op: u32) -> vec3<f32> {
+    let tr = trace_raw(g, op);
+    return vec3<f32>(trace[tr], trace[tr + 1u], trace[tr + 2u]);
+}
+
+// An operator's output as the clamp of `Enhancer::operator` leaves it.
+fn clamped(raw: vec3<f32>) -> vec3<f32> {
+    return min(max(raw, vec3<f32>(shape.lo)), vec3<f32>(shape.hi));
 }

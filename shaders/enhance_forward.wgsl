@@ -51,13 +51,12 @@ fn weights(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) groups
 @compute @workgroup_size(GROUP, 1, 1)
 fn operators(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>,
              @builtin(local_invocation_index) lid: u32) {
-    let ops = shape.experts - 1u;
-    let id = linear_id(wg, groups, lid);
-    if (ops == 0u || id >= shape.count * ops) {
+    let item = gaussian_and_operator(linear_id(wg, groups, lid));
+    if (item.x >= shape.count) {
         return;
     }
-    let g = id / ops;
-    let op = id % ops + 1u;
+    let g = item.x;
+    let op = item.y;
     let h = shape.hidden;
     let c = color0(g);
     let t = tensors(op);
@@ -98,9 +97,7 @@ fn mixed(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) groups: 
     let tw = trace_w(g);
     var out = color0(g) * trace[tw];
     for (var op = 1u; op < shape.experts; op = op + 1u) {
-        let tr = trace_raw(g, op);
-        let raw = vec3<f32>(trace[tr], trace[tr + 1u], trace[tr + 2u]);
-        out = out + trace[tw + op] * min(max(raw, vec3<f32>(shape.lo)), vec3<f32>(shape.hi));
+        out = out + trace[tw + op] * clamped(output(g, op));
     }
     colors[3u * g] = out.x;
     colors[3u * g + 1u] = out.y;

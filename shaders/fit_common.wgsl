@@ -46,16 +46,6 @@ struct Fit {
 
 @group(0) @binding(0) var<uniform> fit: Fit;
 
-// The index of an invocation of a one-dimensional kernel, whose workgroups the host lays
-// out in two dimensions when there are more than a dimension allows.
-fn linear_id(wg: vec3<u32>, groups: vec3<u32>, lid: u32) -> u32 {
-    return (wg.y * groups.x + wg.x) * GROUP + lid;
-}
-
-fn workgroup_index(wg: vec3<u32>, groups: vec3<u32>) -> u32 {
-    return wg.y * groups.x + wg.x;
-}
-
 // `CovParam::LogScaleRotation.covariance`: Σ = R diag(σ1², σ2²) Rᵀ in image units, as
 // (Σuu, Σuv, Σvv), σ = exp of the clamped log-scale. The projection and the chain rule
 // both take it from here, so the clamps they test see the same numbers.

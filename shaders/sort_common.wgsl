@@ -20,7 +20,3 @@ struct SortParams {
     _pad: u32,
 }
 
-// Blocks are dispatched over a 2D grid (one dimension may hold too few workgroups).
-fn sort_block(wg: vec3<u32>, groups: vec3<u32>) -> u32 {
-    return wg.y * groups.x + wg.x;
-}

@@ -21,7 +21,7 @@ fn main(
     @builtin(num_workgroups) groups: vec3<u32>,
     @builtin(local_invocation_index) lid: u32,
 ) {
-    let block = sort_block(wg, groups);
+    let block = workgroup_index(wg, groups);
     if (block >= params.blocks) {
         return;
     }

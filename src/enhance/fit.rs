@@ -990,11 +990,6 @@ mod tests {
             if experts > 1 {
                 errors.push(("operators", rel(&cpu.grad[head..], &on_gpu.grad[head..])));
             }
-            if experts == 64 && hidden == 64 {
-                for i in 0..6 {
-                    eprintln!("DBG {i} cpu {:?} gpu {:?}", cpu.colors[i], on_gpu.colors[i]);
-                }
-            }
             for (name, e) in errors {
                 eprintln!("{blend:?} K {experts} h {hidden} {name}: relative error {e:.2e}");
                 assert!(

@@ -22,7 +22,6 @@
 use super::{too_big, Gpu, Kernel};
 use crate::enhance::mixture::{MapTap, GAIN_LOG_MAX};
 use crate::format::{Error, ErrorKind, Result};
-use wgpu::util::DeviceExt;
 
 /// u32 words per Gaussian in the `gauss` buffer (`GAUSS` of the shaders' prelude).
 pub(crate) const GAUSS: usize = 12;
@@ -131,127 +130,111 @@ impl<'g> GpuMixture<'g> {
         taps: &[MapTap],
         c0: &[[f32; 3]],
     ) -> Result<GpuMixture<'g>> {
-        gpu.checked(|| Self::build(gpu, experts, hidden, clamp, logits_len, chunk, taps, c0))
-    }
-
-    #[allow(clippy::too_many_arguments)]
-    fn build(
-        gpu: &'g Gpu,
-        experts: usize,
-        hidden: usize,
-        clamp: [f32; 2],
-        logits_len: usize,
-        chunk: usize,
-        taps: &[MapTap],
-        c0: &[[f32; 3]],
-    ) -> Result<GpuMixture<'g>> {
-        let count = c0.len();
-        if count == 0 {
-            return Err(Error::new(
-                ErrorKind::InvalidValue,
-                "no Gaussians to enhance",
-            ));
-        }
-        if !(1..=WIDTH_MAX).contains(&experts)
-            || !(1..=WIDTH_MAX).contains(&hidden)
-            || taps.len() != count
-            || chunk == 0
-            || logits_len % experts != 0
-            || taps
-                .iter()
-                .any(|t| t.cells.iter().any(|&c| c as usize * experts >= logits_len))
-        {
-            return Err(Error::new(
-                ErrorKind::InvalidValue,
-                "a GPU mixture needs matching taps and colours, 1..=64 experts and hidden units",
-            ));
-        }
-        let ops = experts - 1;
-        let per = crate::enhance::mixture::Enhancer::params_per_operator(hidden);
-        let params_len = ops * per;
-        let chunks = count.div_ceil(chunk);
-        // Trace: K weights, then 2h pre-activations and 3 outputs per operator.
-        let n = count as u64;
-        let trace_len = n * (experts + ops * (2 * hidden + 3)) as u64;
-        let back_len = n * (ops * (2 * hidden + 1)) as u64;
-        let partials_len = (chunks * params_len) as u64;
-        for words in [
-            trace_len,
-            back_len,
-            partials_len,
-            n * experts as u64,
-            n * GAUSS as u64,
-            n * 3,
-        ] {
-            if words * 4 > gpu.max_binding || words > u64::from(u32::MAX) {
-                return Err(too_big(&gpu.info, "this enhancement's mixture"));
+        gpu.checked(|| {
+            let count = c0.len();
+            if count == 0 {
+                return Err(Error::new(
+                    ErrorKind::InvalidValue,
+                    "no Gaussians to enhance",
+                ));
             }
-        }
-        let uniform = MixUniform {
-            count: count as u32,
-            experts: experts as u32,
-            hidden: hidden as u32,
-            per: per as u32,
-            lo: clamp[0],
-            hi: clamp[1],
-            gain_log_max: GAIN_LOG_MAX,
-            gain_max: GAIN_LOG_MAX.exp(),
-            chunk: chunk as u32,
-            _pad: [0; 3],
-        };
-        let mut gauss = vec![0u32; count * GAUSS];
-        for ((rec, t), c) in gauss.chunks_exact_mut(GAUSS).zip(taps).zip(c0) {
-            rec[..4].copy_from_slice(&t.cells);
-            for i in 0..4 {
-                rec[4 + i] = t.weights[i].to_bits();
+            if !(1..=WIDTH_MAX).contains(&experts)
+                || !(1..=WIDTH_MAX).contains(&hidden)
+                || taps.len() != count
+                || chunk == 0
+                || logits_len % experts != 0
+                || taps
+                    .iter()
+                    .any(|t| t.cells.iter().any(|&c| c as usize * experts >= logits_len))
+            {
+                return Err(Error::new(
+                    ErrorKind::InvalidValue,
+                    "a GPU mixture needs matching taps and colours, 1..=64 experts and hidden units",
+                ));
             }
-            for i in 0..3 {
-                rec[8 + i] = c[i].to_bits();
+            let ops = experts - 1;
+            let per = crate::enhance::mixture::Enhancer::params_per_operator(hidden);
+            let params_len = ops * per;
+            let chunks = count.div_ceil(chunk);
+            // Trace: K weights, then 2h pre-activations and 3 outputs per operator.
+            let n = count as u64;
+            let trace_len = n * (experts + ops * (2 * hidden + 3)) as u64;
+            let back_len = n * (ops * (2 * hidden + 1)) as u64;
+            let partials_len = (chunks * params_len) as u64;
+            for words in [
+                trace_len,
+                back_len,
+                partials_len,
+                n * experts as u64,
+                n * GAUSS as u64,
+                n * 3,
+            ] {
+                if words * 4 > gpu.max_binding || words > u64::from(u32::MAX) {
+                    return Err(too_big(&gpu.info, "this enhancement's mixture"));
+                }
             }
-        }
-        let device = &gpu.device;
-        let k = gpu.enhance_kernels();
-        let mix = gpu.uniform_buffer(bytemuck::bytes_of(&uniform));
-        let gauss = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: None,
-            contents: bytemuck::cast_slice(&gauss),
-            usage: wgpu::BufferUsages::STORAGE,
-        });
-        let params = gpu.zeroed(params_len as u64 * 4);
-        let logits = gpu.zeroed(logits_len as u64 * 4);
-        let colors = gpu.zeroed(count as u64 * 12);
-        let trace = gpu.zeroed(trace_len * 4);
-        let g_col = gpu.zeroed(count as u64 * 12);
-        let g_logits = gpu.zeroed(count as u64 * experts as u64 * 4);
-        let back = gpu.zeroed(back_len * 4);
-        let partials = gpu.zeroed(partials_len * 4);
-        Ok(GpuMixture {
-            forward: k
-                .weights
-                .bind(device, &[&mix, &params, &logits, &gauss, &colors, &trace]),
-            backward: k.operators_back.bind(
-                device,
-                &[&mix, &params, &gauss, &trace, &g_col, &g_logits, &back],
-            ),
-            sums: k
-                .params
-                .bind(device, &[&mix, &gauss, &trace, &back, &partials]),
-            gaussian_groups: gpu.groups(n)?,
-            operator_groups: gpu.groups(n * ops as u64)?,
-            param_groups: gpu.groups(partials_len)?,
-            gpu,
-            count,
-            experts,
-            params_len,
-            logits_len,
-            chunk,
-            chunks,
-            params,
-            logits,
-            colors,
-            g_col,
-            g_logits,
-            partials,
+            let uniform = MixUniform {
+                count: count as u32,
+                experts: experts as u32,
+                hidden: hidden as u32,
+                per: per as u32,
+                lo: clamp[0],
+                hi: clamp[1],
+                gain_log_max: GAIN_LOG_MAX,
+                gain_max: GAIN_LOG_MAX.exp(),
+                chunk: chunk as u32,
+                _pad: [0; 3],
+            };
+            let mut gauss = vec![0u32; count * GAUSS];
+            for ((rec, t), c) in gauss.chunks_exact_mut(GAUSS).zip(taps).zip(c0) {
+                rec[..4].copy_from_slice(&t.cells);
+                for i in 0..4 {
+                    rec[4 + i] = t.weights[i].to_bits();
+                }
+                for i in 0..3 {
+                    rec[8 + i] = c[i].to_bits();
+                }
+            }
+            let device = &gpu.device;
+            let k = gpu.enhance_kernels();
+            let mix = gpu.uniform_buffer(bytemuck::bytes_of(&uniform));
+            let gauss = gpu.storage(bytemuck::cast_slice(&gauss));
+            let params = gpu.zeroed(params_len as u64 * 4);
+            let logits = gpu.zeroed(logits_len as u64 * 4);
+            let colors = gpu.zeroed(count as u64 * 12);
+            let trace = gpu.zeroed(trace_len * 4);
+            let g_col = gpu.zeroed(count as u64 * 12);
+            let g_logits = gpu.zeroed(count as u64 * experts as u64 * 4);
+            let back = gpu.zeroed(back_len * 4);
+            let partials = gpu.zeroed(partials_len * 4);
+            Ok(GpuMixture {
+                forward: k
+                    .weights
+                    .bind(device, &[&mix, &params, &logits, &gauss, &colors, &trace]),
+                backward: k.operators_back.bind(
+                    device,
+                    &[&mix, &params, &gauss, &trace, &g_col, &g_logits, &back],
+                ),
+                sums: k
+                    .params
+                    .bind(device, &[&mix, &gauss, &trace, &back, &partials]),
+                gaussian_groups: gpu.groups(n)?,
+                operator_groups: gpu.groups(n * ops as u64)?,
+                param_groups: gpu.groups(partials_len)?,
+                gpu,
+                count,
+                experts,
+                params_len,
+                logits_len,
+                chunk,
+                chunks,
+                params,
+                logits,
+                colors,
+                g_col,
+                g_logits,
+                partials,
+            })
         })
     }
 
@@ -266,46 +249,37 @@ impl<'g> GpuMixture<'g> {
         assert_eq!(logits.len(), self.logits_len);
         assert_eq!(params.len(), self.params_len);
         assert_eq!(out.len(), self.count);
-        self.gpu
-            .checked(|| self.forward_unchecked(logits, params, out))
-    }
-
-    fn forward_unchecked(
-        &self,
-        logits: &[f32],
-        params: &[f32],
-        out: &mut [[f32; 3]],
-    ) -> Result<()> {
-        let gpu = self.gpu;
-        gpu.queue
-            .write_buffer(&self.logits, 0, bytemuck::cast_slice(logits));
-        if !params.is_empty() {
+        self.gpu.checked(|| {
+            let gpu = self.gpu;
             gpu.queue
-                .write_buffer(&self.params, 0, bytemuck::cast_slice(params));
-        }
-        let mut enc = gpu.encoder();
-        {
+                .write_buffer(&self.logits, 0, bytemuck::cast_slice(logits));
+            if !params.is_empty() {
+                gpu.queue
+                    .write_buffer(&self.params, 0, bytemuck::cast_slice(params));
+            }
             let k = gpu.enhance_kernels();
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
-            k.weights
-                .dispatch(&mut pass, &self.forward, self.gaussian_groups);
-            k.operators
-                .dispatch(&mut pass, &self.forward, self.operator_groups);
-            k.mixed
-                .dispatch(&mut pass, &self.forward, self.gaussian_groups);
-        }
-        let [colors] = gpu.read_back(enc, [&self.colors])?;
-        let colors: &[f32] = bytemuck::cast_slice(&colors);
-        if !colors[..self.count * 3].iter().all(|c| c.is_finite()) {
-            return Err(Error::new(
-                ErrorKind::InvalidValue,
-                "the GPU's mixture gave a non-finite colour",
-            ));
-        }
-        for (o, c) in out.iter_mut().zip(colors.chunks_exact(3)) {
-            *o = [c[0], c[1], c[2]];
-        }
-        Ok(())
+            let mut enc = gpu.encoder();
+            gpu.pass(
+                &mut enc,
+                &[
+                    (&k.weights, &self.forward, self.gaussian_groups),
+                    (&k.operators, &self.forward, self.operator_groups),
+                    (&k.mixed, &self.forward, self.gaussian_groups),
+                ],
+            );
+            let [colors] = gpu.read_back(enc, [&self.colors])?;
+            let colors: &[f32] = bytemuck::cast_slice(&colors);
+            if !colors[..self.count * 3].iter().all(|c| c.is_finite()) {
+                return Err(Error::new(
+                    ErrorKind::InvalidValue,
+                    "the GPU's mixture gave a non-finite colour",
+                ));
+            }
+            for (o, c) in out.iter_mut().zip(colors.chunks_exact(3)) {
+                *o = [c[0], c[1], c[2]];
+            }
+            Ok(())
+        })
     }
 
     /// The backward pass of the last [`GpuMixture::forward`] from the colour gradients
@@ -326,62 +300,52 @@ impl<'g> GpuMixture<'g> {
         assert_eq!(taps.len(), self.count);
         assert_eq!(g_map.len(), self.logits_len);
         assert_eq!(g_params.len(), self.params_len);
-        self.gpu
-            .checked(|| self.backward_unchecked(g_col, taps, g_map, g_params))
-    }
-
-    fn backward_unchecked(
-        &self,
-        g_col: &[[f32; 3]],
-        taps: &[MapTap],
-        g_map: &mut [f32],
-        g_params: &mut [f32],
-    ) -> Result<()> {
-        let gpu = self.gpu;
-        gpu.queue
-            .write_buffer(&self.g_col, 0, bytemuck::cast_slice(g_col));
-        let mut enc = gpu.encoder();
-        {
+        self.gpu.checked(|| {
+            let gpu = self.gpu;
+            gpu.queue
+                .write_buffer(&self.g_col, 0, bytemuck::cast_slice(g_col));
             let k = gpu.enhance_kernels();
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
-            k.operators_back
-                .dispatch(&mut pass, &self.backward, self.operator_groups);
-            k.logits_back
-                .dispatch(&mut pass, &self.backward, self.gaussian_groups);
+            let mut enc = gpu.encoder();
+            // `enhance_params` returns at once when there are no operators.
+            gpu.pass(
+                &mut enc,
+                &[
+                    (&k.operators_back, &self.backward, self.operator_groups),
+                    (&k.logits_back, &self.backward, self.gaussian_groups),
+                    (&k.params, &self.sums, self.param_groups),
+                ],
+            );
+            let [g_logits, partials] = gpu.read_back(enc, [&self.g_logits, &self.partials])?;
+            let g_logits: &[f32] = bytemuck::cast_slice(&g_logits);
+            let partials: &[f32] = bytemuck::cast_slice(&partials);
             if self.params_len > 0 {
-                k.params.dispatch(&mut pass, &self.sums, self.param_groups);
+                for part in partials.chunks_exact(self.params_len).take(self.chunks) {
+                    for (g, p) in g_params.iter_mut().zip(part) {
+                        *g += p;
+                    }
+                }
             }
-        }
-        let [g_logits, partials] = gpu.read_back(enc, [&self.g_logits, &self.partials])?;
-        let g_logits: &[f32] = bytemuck::cast_slice(&g_logits);
-        let partials: &[f32] = bytemuck::cast_slice(&partials);
-        if self.params_len > 0 {
-            for part in partials.chunks_exact(self.params_len).take(self.chunks) {
-                for (g, p) in g_params.iter_mut().zip(part) {
+            // Spread each Gaussian's logit gradient over its tap's cells, chunk by chunk as
+            // the CPU pass does.
+            let k = self.experts;
+            let mut part = vec![0.0f32; g_map.len()];
+            for (taps, gl) in taps.chunks(self.chunk).zip(g_logits.chunks(self.chunk * k)) {
+                part.fill(0.0);
+                for (t, gl) in taps.iter().zip(gl.chunks_exact(k)) {
+                    for (&cell, &b) in t.cells.iter().zip(&t.weights) {
+                        if b == 0.0 {
+                            continue;
+                        }
+                        for (p, &x) in part[cell as usize * k..][..k].iter_mut().zip(gl) {
+                            *p += b * x;
+                        }
+                    }
+                }
+                for (g, p) in g_map.iter_mut().zip(&part) {
                     *g += p;
                 }
             }
-        }
-        // Spread each Gaussian's logit gradient over its tap's cells, chunk by chunk as
-        // the CPU pass does.
-        let k = self.experts;
-        let mut part = vec![0.0f32; g_map.len()];
-        for (taps, gl) in taps.chunks(self.chunk).zip(g_logits.chunks(self.chunk * k)) {
-            part.fill(0.0);
-            for (t, gl) in taps.iter().zip(gl.chunks_exact(k)) {
-                for (&cell, &b) in t.cells.iter().zip(&t.weights) {
-                    if b == 0.0 {
-                        continue;
-                    }
-                    for (p, &x) in part[cell as usize * k..][..k].iter_mut().zip(gl) {
-                        *p += b * x;
-                    }
-                }
-            }
-            for (g, p) in g_map.iter_mut().zip(&part) {
-                *g += p;
-            }
-        }
-        Ok(())
+            Ok(())
+        })
     }
 }

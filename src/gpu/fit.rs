@@ -32,7 +32,6 @@ use crate::fit::LearningRates;
 use crate::format::{BitDepths, Error, ErrorKind, Limits, Result, MAX_BITS};
 use crate::model::{Blend, GaussianSet};
 use crate::render::{RgbImage, TILE};
-use wgpu::util::DeviceExt;
 
 /// Floats per Gaussian in the parameter and moment buffers (`STRIDE` of
 /// `fit_common.wgsl`): u, v, ln σ1, ln σ2, θ, r, g, b, opacity.
@@ -190,61 +189,53 @@ impl<'g> ResidentFit<'g> {
         params: &GaussianSet,
         adam: &AdamState,
     ) -> Result<ResidentFit<'g>> {
-        gpu.checked(|| Self::build(gpu, target, blend, params, adam))
-    }
-
-    fn build(
-        gpu: &'g Gpu,
-        target: &RgbImage,
-        blend: Blend,
-        params: &GaussianSet,
-        adam: &AdamState,
-    ) -> Result<ResidentFit<'g>> {
-        let (w, h) = (target.width, target.height);
-        Limits::default().check_output(w, h)?;
-        let count = params.len();
-        if count == 0
-            || count > u32::MAX as usize / 64
-            || !params.is_consistent()
-            || adam.m.len() != count
-            || adam.v.len() != count
-            || target.data.len() != w as usize * h as usize * 3
-        {
-            return Err(Error::new(
-                ErrorKind::InvalidValue,
-                "a GPU fit needs a consistent, non-empty Gaussian set and target",
-            ));
-        }
-        let has_opacity = params.opacity.is_some();
-        let mut uniform = FitUniform::new(w, h, count, blend, has_opacity);
-        uniform.beta1 = adam.beta1;
-        uniform.beta2 = adam.beta2;
-        uniform.eps = adam.eps;
-        // Every step clamps opacity to [0, 1]; the upload does the same, so the chain rule
-        // on the GPU never meets an opacity outside it.
-        let mut flat = flatten(params, 1.0);
-        for g in flat.chunks_exact_mut(STRIDE) {
-            g[8] = if g[8].is_finite() {
-                g[8].clamp(0.0, 1.0)
-            } else {
-                0.0
-            };
-        }
-        let forward = Forward::new(gpu, &uniform, &flat)?;
-        let back = Backward::new(gpu, &forward, &uniform, target, adam)?;
-        let capacity = capacity_for(forward.count_entries(gpu)?);
-        let lists = Lists::new(gpu, &forward, &back, blend, capacity)?;
-        Ok(ResidentFit {
-            gpu,
-            uniform,
-            blend,
-            count,
-            has_opacity,
-            adam_step: adam.step,
-            forward,
-            back,
-            lists,
-            grow_to: None,
+        gpu.checked(|| {
+            let (w, h) = (target.width, target.height);
+            Limits::default().check_output(w, h)?;
+            let count = params.len();
+            if count == 0
+                || count > u32::MAX as usize / 64
+                || !params.is_consistent()
+                || adam.m.len() != count
+                || adam.v.len() != count
+                || target.data.len() != w as usize * h as usize * 3
+            {
+                return Err(Error::new(
+                    ErrorKind::InvalidValue,
+                    "a GPU fit needs a consistent, non-empty Gaussian set and target",
+                ));
+            }
+            let has_opacity = params.opacity.is_some();
+            let mut uniform = FitUniform::new(w, h, count, blend, has_opacity);
+            uniform.beta1 = adam.beta1;
+            uniform.beta2 = adam.beta2;
+            uniform.eps = adam.eps;
+            // Every step clamps opacity to [0, 1]; the upload does the same, so the chain rule
+            // on the GPU never meets an opacity outside it.
+            let mut flat = flatten(params, 1.0);
+            for g in flat.chunks_exact_mut(STRIDE) {
+                g[8] = if g[8].is_finite() {
+                    g[8].clamp(0.0, 1.0)
+                } else {
+                    0.0
+                };
+            }
+            let forward = Forward::new(gpu, &uniform, &flat)?;
+            let back = Backward::new(gpu, &forward, &uniform, target, adam)?;
+            let capacity = capacity_for(forward.count_entries(gpu)?);
+            let lists = Lists::new(gpu, &forward, &back, blend, capacity)?;
+            Ok(ResidentFit {
+                gpu,
+                uniform,
+                blend,
+                count,
+                has_opacity,
+                adam_step: adam.step,
+                forward,
+                back,
+                lists,
+                grow_to: None,
+            })
         })
     }
 
@@ -260,107 +251,101 @@ impl<'g> ResidentFit<'g> {
         measure: bool,
     ) -> Result<Option<StepReport>> {
         let gpu = self.gpu;
-        gpu.checked(|| self.step_unchecked(lr, qat, measure))
-    }
-
-    fn step_unchecked(
-        &mut self,
-        lr: &LearningRates,
-        qat: Option<BitDepths>,
-        measure: bool,
-    ) -> Result<Option<StepReport>> {
-        let gpu = self.gpu;
-        if let Some(capacity) = self.grow_to.take() {
-            self.lists = Lists::new(gpu, &self.forward, &self.back, self.blend, capacity)?;
-        }
-        self.adam_step += 1;
-        let u = &mut self.uniform;
-        u.capacity = self.lists.forward.capacity;
-        u.c1 = 1.0 - u.beta1.powi(self.adam_step);
-        u.c2 = 1.0 - u.beta2.powi(self.adam_step);
-        u.lr = [lr.position, lr.log_scale, lr.rotation, lr.color, lr.opacity];
-        u.qat = u32::from(qat.is_some());
-        if let Some(b) = qat {
-            u.bits =
-                [b.position, b.covariance, b.color, b.opacity].map(|b| u32::from(b.min(MAX_BITS)));
-        }
-        gpu.queue
-            .write_buffer(&self.forward.fit, 0, bytemuck::bytes_of(&self.uniform));
-        let k = gpu.fit_kernels();
-        let (f, b, l) = (&self.forward, &self.back, &self.lists);
-        let mut enc = gpu.encoder();
-        f.record_binning(gpu, &l.forward, &mut enc, qat.is_some());
-        {
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
-            f.record_render(gpu, &l.forward, &mut pass);
-            k.loss.dispatch(&mut pass, &b.loss, b.pixel_groups);
-            let tiles = (self.uniform.tiles_x, self.uniform.tiles_y);
-            gpu.backward_kernel(self.blend)
-                .dispatch(&mut pass, &l.backward, tiles);
-            k.adam.dispatch(&mut pass, &l.adam, f.gaussian_groups);
-        }
-        if !measure {
-            gpu.queue.submit([enc.finish()]);
-            return Ok(None);
-        }
-        let [loss_part, sse8_part, entries] =
-            gpu.read_back(enc, [&b.loss_part, &b.sse8_part, &f.entries])?;
-        let entries = bytemuck::cast_slice::<u8, u32>(&entries)[0];
-        let loss: f64 = bytemuck::cast_slice::<u8, f32>(&loss_part)
-            .iter()
-            .map(|&x| f64::from(x))
-            .sum();
-        let sse: u64 = bytemuck::cast_slice::<u8, u32>(&sse8_part)
-            .iter()
-            .map(|&x| u64::from(x))
-            .sum();
-        let values = u64::from(self.uniform.width) * u64::from(self.uniform.height) * 3;
-        let (entries, capacity) = (u64::from(entries), u64::from(self.lists.forward.capacity));
-        if entries * 4 > capacity * 3 {
-            let grown = capacity_for(entries);
-            if u64::from(grown) < entries {
-                return Err(too_big(&gpu.info, "the tile lists of this fit"));
+        gpu.checked(|| {
+            let gpu = self.gpu;
+            if let Some(capacity) = self.grow_to.take() {
+                self.lists = Lists::new(gpu, &self.forward, &self.back, self.blend, capacity)?;
             }
-            self.grow_to = Some(grown);
-        }
-        if entries > capacity {
-            // Skipped, so not counted in Adam's bias correction (an unmeasured step that
-            // overflowed before it still is: the host cannot know of it).
-            self.adam_step -= 1;
-            return Ok(None);
-        }
-        Ok(Some(StepReport {
-            loss: (loss / values as f64) as f32,
-            psnr: crate::metrics::psnr_of_sse(sse, values),
-        }))
+            self.adam_step += 1;
+            let u = &mut self.uniform;
+            u.capacity = self.lists.forward.capacity;
+            u.c1 = 1.0 - u.beta1.powi(self.adam_step);
+            u.c2 = 1.0 - u.beta2.powi(self.adam_step);
+            u.lr = [lr.position, lr.log_scale, lr.rotation, lr.color, lr.opacity];
+            u.qat = u32::from(qat.is_some());
+            if let Some(b) = qat {
+                u.bits = [b.position, b.covariance, b.color, b.opacity]
+                    .map(|b| u32::from(b.min(MAX_BITS)));
+            }
+            gpu.queue
+                .write_buffer(&self.forward.fit, 0, bytemuck::bytes_of(&self.uniform));
+            let k = gpu.fit_kernels();
+            let (f, b, l) = (&self.forward, &self.back, &self.lists);
+            let mut enc = gpu.encoder();
+            f.record_binning(gpu, &l.forward, &mut enc, qat.is_some());
+            let [tiles, render] = f.render(gpu, &l.forward);
+            let tile_grid = (self.uniform.tiles_x, self.uniform.tiles_y);
+            gpu.pass(
+                &mut enc,
+                &[
+                    tiles,
+                    render,
+                    (&k.loss, &b.loss, b.pixel_groups),
+                    (gpu.backward_kernel(self.blend), &l.backward, tile_grid),
+                    (&k.adam, &l.adam, f.gaussian_groups),
+                ],
+            );
+            if !measure {
+                gpu.queue.submit([enc.finish()]);
+                return Ok(None);
+            }
+            let [loss_part, sse8_part, entries] =
+                gpu.read_back(enc, [&b.loss_part, &b.sse8_part, &f.entries])?;
+            let entries = bytemuck::cast_slice::<u8, u32>(&entries)[0];
+            let loss: f64 = bytemuck::cast_slice::<u8, f32>(&loss_part)
+                .iter()
+                .map(|&x| f64::from(x))
+                .sum();
+            let sse: u64 = bytemuck::cast_slice::<u8, u32>(&sse8_part)
+                .iter()
+                .map(|&x| u64::from(x))
+                .sum();
+            let values = u64::from(self.uniform.width) * u64::from(self.uniform.height) * 3;
+            let (entries, capacity) = (u64::from(entries), u64::from(self.lists.forward.capacity));
+            if entries * 4 > capacity * 3 {
+                let grown = capacity_for(entries);
+                if u64::from(grown) < entries {
+                    return Err(too_big(&gpu.info, "the tile lists of this fit"));
+                }
+                self.grow_to = Some(grown);
+            }
+            if entries > capacity {
+                // Skipped, so not counted in Adam's bias correction (an unmeasured step that
+                // overflowed before it still is: the host cannot know of it).
+                self.adam_step -= 1;
+                return Ok(None);
+            }
+            Ok(Some(StepReport {
+                loss: (loss / values as f64) as f32,
+                psnr: crate::metrics::psnr_of_sse(sse, values),
+            }))
+        })
     }
 
     /// The parameters and Adam's state as they are now, shaped as the CPU fitter keeps
     /// them.
     pub fn download(&self) -> Result<(GaussianSet, AdamState)> {
-        self.gpu.checked(|| self.download_unchecked())
-    }
-
-    fn download_unchecked(&self) -> Result<(GaussianSet, AdamState)> {
-        let enc = self.gpu.encoder();
-        let [params, moments] = self
-            .gpu
-            .read_back(enc, [&self.forward.params, &self.back.moments])?;
-        let params: &[f32] = bytemuck::cast_slice(&params);
-        let moments: &[f32] = bytemuck::cast_slice(&moments);
-        let n = self.count * STRIDE;
-        let o = self.has_opacity;
-        Ok((
-            unflatten(&params[..n], o),
-            AdamState {
-                step: self.adam_step,
-                beta1: self.uniform.beta1,
-                beta2: self.uniform.beta2,
-                eps: self.uniform.eps,
-                m: unflatten(&moments[..n], o),
-                v: unflatten(&moments[n..2 * n], o),
-            },
-        ))
+        self.gpu.checked(|| {
+            let enc = self.gpu.encoder();
+            let [params, moments] = self
+                .gpu
+                .read_back(enc, [&self.forward.params, &self.back.moments])?;
+            let params: &[f32] = bytemuck::cast_slice(&params);
+            let moments: &[f32] = bytemuck::cast_slice(&moments);
+            let n = self.count * STRIDE;
+            let o = self.has_opacity;
+            Ok((
+                unflatten(&params[..n], o),
+                AdamState {
+                    step: self.adam_step,
+                    beta1: self.uniform.beta1,
+                    beta2: self.uniform.beta2,
+                    eps: self.uniform.eps,
+                    m: unflatten(&moments[..n], o),
+                    v: unflatten(&moments[n..2 * n], o),
+                },
+            ))
+        })
     }
 }
 
@@ -378,17 +363,8 @@ impl Backward {
         let loss_groups = u64::from(pixel_groups.0) * u64::from(pixel_groups.1);
         let mut moments = flatten(&adam.m, 0.0);
         moments.extend(flatten(&adam.v, 0.0));
-        let storage = |contents: &[u8]| {
-            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: None,
-                contents,
-                usage: wgpu::BufferUsages::STORAGE
-                    | wgpu::BufferUsages::COPY_SRC
-                    | wgpu::BufferUsages::COPY_DST,
-            })
-        };
-        let moments = storage(bytemuck::cast_slice(&moments));
-        let target = storage(bytemuck::cast_slice(&target.data));
+        let moments = gpu.storage(bytemuck::cast_slice(&moments));
+        let target = gpu.storage(bytemuck::cast_slice(&target.data));
         let dl = gpu.zeroed(pixels * 12);
         let loss_part = gpu.zeroed(loss_groups * 4);
         let sse8_part = gpu.zeroed(loss_groups * 4);

@@ -8,11 +8,10 @@
 
 use super::fit::{FitUniform, STRIDE};
 use super::sort::SortPlan;
-use super::{too_big, Gpu};
+use super::{too_big, Dispatch, Gpu};
 use crate::format::{Error, ErrorKind, Limits, Result};
 use crate::model::{CovParam, GaussianSet, Scene};
 use crate::render::RgbImage;
-use wgpu::util::DeviceExt;
 
 /// Buffers and bindings of the forward half whose size the image and the number of
 /// Gaussians fix.
@@ -65,13 +64,7 @@ impl Forward {
         let device = &gpu.device;
         let k = gpu.fit_kernels();
         let fit = gpu.uniform_buffer(bytemuck::bytes_of(uniform));
-        let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: None,
-            contents: bytemuck::cast_slice(params),
-            usage: wgpu::BufferUsages::STORAGE
-                | wgpu::BufferUsages::COPY_SRC
-                | wgpu::BufferUsages::COPY_DST,
-        });
+        let params = gpu.storage(bytemuck::cast_slice(params));
         let ranges = gpu.zeroed(STRIDE as u64 * 8);
         let gaussians = gpu.zeroed(n * 48);
         let boxes = gpu.zeroed(n * 16);
@@ -118,12 +111,13 @@ impl Forward {
     pub(crate) fn count_entries(&self, gpu: &Gpu) -> Result<u64> {
         let k = gpu.fit_kernels();
         let mut enc = gpu.encoder();
-        {
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
-            k.project
-                .dispatch(&mut pass, &self.project, self.gaussian_groups);
-            k.scan.dispatch(&mut pass, &self.scan, (1, 1));
-        }
+        gpu.pass(
+            &mut enc,
+            &[
+                (&k.project, &self.project, self.gaussian_groups),
+                (&k.scan, &self.scan, (1, 1)),
+            ],
+        );
         let [entries] = gpu.read_back(enc, [&self.entries])?;
         Ok(u64::from(bytemuck::cast_slice::<u8, u32>(&entries)[0]))
     }
@@ -137,31 +131,26 @@ impl Forward {
         quantized: bool,
     ) {
         let k = gpu.fit_kernels();
-        {
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
-            if quantized {
-                k.range.dispatch(&mut pass, &self.range, (1, 1));
-            }
-            k.project
-                .dispatch(&mut pass, &self.project, self.gaussian_groups);
-            k.scan.dispatch(&mut pass, &self.scan, (1, 1));
-            k.emit
-                .dispatch(&mut pass, &lists.emit, self.gaussian_groups);
+        let range = (&k.range, &self.range, (1, 1));
+        let rest = [
+            (&k.project, &self.project, self.gaussian_groups),
+            (&k.scan, &self.scan, (1, 1)),
+            (&k.emit, &lists.emit, self.gaussian_groups),
+        ];
+        if quantized {
+            gpu.pass(enc, &[range, rest[0], rest[1], rest[2]]);
+        } else {
+            gpu.pass(enc, &rest);
         }
         lists.plan.record(&k.sort, enc);
     }
 
-    /// Record the tile ranges and the render into `pass` (after [`Forward::record_binning`]).
-    pub(crate) fn record_render(
-        &self,
-        gpu: &Gpu,
-        lists: &ForwardLists,
-        pass: &mut wgpu::ComputePass<'_>,
-    ) {
-        gpu.fit_kernels()
-            .tiles
-            .dispatch(pass, &lists.tiles, self.tile_groups);
-        gpu.render.dispatch(pass, &lists.render, self.tiles);
+    /// The tile ranges and the render, to run after [`Forward::record_binning`].
+    pub(crate) fn render<'a>(&'a self, gpu: &'a Gpu, lists: &'a ForwardLists) -> [Dispatch<'a>; 2] {
+        [
+            (&gpu.fit_kernels().tiles, &lists.tiles, self.tile_groups),
+            (&gpu.render, &lists.render, self.tiles),
+        ]
     }
 }
 
@@ -252,52 +241,51 @@ impl<'g> GpuScene<'g> {
     /// Upload `scene` for drawing at `width × height`, and draw it once to check that
     /// its tile lists fit.
     pub fn new(gpu: &'g Gpu, scene: &Scene, width: u32, height: u32) -> Result<GpuScene<'g>> {
-        gpu.checked(|| Self::build(gpu, scene, width, height))
-    }
-
-    fn build(gpu: &'g Gpu, scene: &Scene, width: u32, height: u32) -> Result<GpuScene<'g>> {
-        Limits::default().check_output(width, height)?;
-        let g = &scene.gaussians;
-        if !g.is_consistent() || g.is_empty() || g.len() > u32::MAX as usize / 64 {
-            return Err(Error::new(
-                ErrorKind::InvalidValue,
-                "a GPU scene needs a consistent, non-empty Gaussian set",
-            ));
-        }
-        let mut uniform = FitUniform::new(width, height, g.len(), scene.blend, g.opacity.is_some());
-        uniform.cholesky = u32::from(scene.cov_param == CovParam::Cholesky);
-        // Parameters read as the CPU reads them (`CovParam::covariance`, `render::project`):
-        // non-finite ones as 0, a non-finite centre or opacity as a Gaussian not drawn.
-        // An angle is brought into [-π, π] here, with the CPU's own `sin` and `cos`: a
-        // GPU's are only accurate near 0, and a file may hold any angle.
-        let rotation = scene.cov_param == CovParam::LogScaleRotation;
-        let params: Vec<f32> = flatten(g, 1.0)
-            .chunks_exact(STRIDE)
-            .flat_map(|p| {
-                let mut p: [f32; STRIDE] = p.try_into().expect("STRIDE floats");
-                for x in &mut p[2..8] {
-                    *x = if x.is_finite() { *x } else { 0.0 };
-                }
-                if rotation {
-                    let (sin, cos) = p[4].sin_cos();
-                    p[4] = sin.atan2(cos);
-                }
-                if !p[8].is_finite() {
-                    p[8] = 0.0;
-                }
-                if !(p[0].is_finite() && p[1].is_finite()) {
-                    p[0] = -1e9;
-                }
-                p
-            })
-            .collect();
-        let forward = Forward::new(gpu, &uniform, &params)?;
-        // A scene does not move: its lists need exactly the entries it has now.
-        let entries = forward.count_entries(gpu)?;
-        if entries > u64::from(MAX_ENTRIES) {
-            return Err(too_big(&gpu.info, "the tile lists of this scene"));
-        }
-        GpuScene::with_lists(gpu, forward, uniform, entries.max(1) as u32)
+        gpu.checked(|| {
+            Limits::default().check_output(width, height)?;
+            let g = &scene.gaussians;
+            if !g.is_consistent() || g.is_empty() || g.len() > u32::MAX as usize / 64 {
+                return Err(Error::new(
+                    ErrorKind::InvalidValue,
+                    "a GPU scene needs a consistent, non-empty Gaussian set",
+                ));
+            }
+            let mut uniform =
+                FitUniform::new(width, height, g.len(), scene.blend, g.opacity.is_some());
+            uniform.cholesky = u32::from(scene.cov_param == CovParam::Cholesky);
+            // Parameters read as the CPU reads them (`CovParam::covariance`, `render::project`):
+            // non-finite ones as 0, a non-finite centre or opacity as a Gaussian not drawn.
+            // An angle is brought into [-π, π] here, with the CPU's own `sin` and `cos`: a
+            // GPU's are only accurate near 0, and a file may hold any angle.
+            let rotation = scene.cov_param == CovParam::LogScaleRotation;
+            let params: Vec<f32> = flatten(g, 1.0)
+                .chunks_exact(STRIDE)
+                .flat_map(|p| {
+                    let mut p: [f32; STRIDE] = p.try_into().expect("STRIDE floats");
+                    for x in &mut p[2..8] {
+                        *x = if x.is_finite() { *x } else { 0.0 };
+                    }
+                    if rotation {
+                        let (sin, cos) = p[4].sin_cos();
+                        p[4] = sin.atan2(cos);
+                    }
+                    if !p[8].is_finite() {
+                        p[8] = 0.0;
+                    }
+                    if !(p[0].is_finite() && p[1].is_finite()) {
+                        p[0] = -1e9;
+                    }
+                    p
+                })
+                .collect();
+            let forward = Forward::new(gpu, &uniform, &params)?;
+            // A scene does not move: its lists need exactly the entries it has now.
+            let entries = forward.count_entries(gpu)?;
+            if entries > u64::from(MAX_ENTRIES) {
+                return Err(too_big(&gpu.info, "the tile lists of this scene"));
+            }
+            GpuScene::with_lists(gpu, forward, uniform, entries.max(1) as u32)
+        })
     }
 
     fn with_lists(
@@ -324,10 +312,8 @@ impl<'g> GpuScene<'g> {
         let mut enc = self.gpu.encoder();
         self.forward
             .record_binning(self.gpu, &self.lists, &mut enc, false);
-        {
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
-            self.forward.record_render(self.gpu, &self.lists, &mut pass);
-        }
+        self.gpu
+            .pass(&mut enc, &self.forward.render(self.gpu, &self.lists));
         enc
     }
 

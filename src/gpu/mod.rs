@@ -75,8 +75,10 @@ fn contract() -> String {
     out
 }
 
+/// [`contract`], the indexing helpers of `shaders/grid.wgsl`, then `parts`.
 pub(crate) fn with_contract(parts: &[&str]) -> String {
     let mut source = contract();
+    source.push_str(include_str!("../../shaders/grid.wgsl"));
     for part in parts {
         source.push_str(part);
     }
@@ -241,83 +243,76 @@ impl Gpu {
         width: u32,
         height: u32,
     ) -> Result<RgbImage> {
-        self.checked(|| self.render_unchecked(proj, blend, width, height))
-    }
-
-    fn render_unchecked(
-        &self,
-        proj: &[Projected],
-        blend: Blend,
-        width: u32,
-        height: u32,
-    ) -> Result<RgbImage> {
-        Limits::default().check_output(width, height)?;
-        let mut data = vec![0.0f32; width as usize * height as usize * 3];
-        if proj.is_empty() {
-            return Ok(RgbImage {
+        self.checked(|| {
+            Limits::default().check_output(width, height)?;
+            let mut data = vec![0.0f32; width as usize * height as usize * 3];
+            if proj.is_empty() {
+                return Ok(RgbImage {
+                    width,
+                    height,
+                    data,
+                });
+            }
+            let tiles_x = width.div_ceil(TILE);
+            let tiles_y = height.div_ceil(TILE);
+            // Entries per tile row, to cut bands that fit the adapter's limits.
+            let mut per_row = vec![0u64; tiles_y as usize];
+            for g in proj {
+                let span = u64::from(g.bbox.x1 / TILE - g.bbox.x0 / TILE + 1);
+                for ty in g.bbox.y0 / TILE..=g.bbox.y1 / TILE {
+                    per_row[ty as usize] += span;
+                }
+            }
+            let row_bytes = u64::from(width) * u64::from(TILE) * 12;
+            let gaussian_bytes = proj.len() as u64 * 48;
+            if gaussian_bytes > self.max_binding
+                || row_bytes > self.max_binding
+                || tiles_x > self.max_groups
+            {
+                return Err(too_big(&self.info, "one tile row"));
+            }
+            let (gaussians, boxes) = upload_layout(proj);
+            let g_buf = self.storage(bytemuck::cast_slice(&gaussians));
+            let b_buf = self.storage(bytemuck::cast_slice(&boxes));
+            let mut ty = 0u32;
+            while ty < tiles_y {
+                // Grow the band while its index list and output fit in one binding.
+                let (mut end, mut entries) = (ty, 0u64);
+                while end < tiles_y
+                    && end - ty < self.max_groups
+                    && (entries + per_row[end as usize]) * 4 <= self.max_binding
+                    && u64::from(end - ty + 1) * row_bytes <= self.max_binding
+                {
+                    entries += per_row[end as usize];
+                    end += 1;
+                }
+                if end == ty {
+                    return Err(too_big(&self.info, "the tile lists of one tile row"));
+                }
+                let rows = ((end * TILE).min(height) - ty * TILE) as usize;
+                let band = &mut data[(ty * TILE) as usize * width as usize * 3..]
+                    [..rows * width as usize * 3];
+                self.render_band(
+                    proj,
+                    (&g_buf, &b_buf),
+                    blend,
+                    (width, height, tiles_x),
+                    ty..end,
+                    band,
+                )?;
+                ty = end;
+            }
+            Ok(RgbImage {
                 width,
                 height,
                 data,
-            });
-        }
-        let tiles_x = width.div_ceil(TILE);
-        let tiles_y = height.div_ceil(TILE);
-        // Entries per tile row, to cut bands that fit the adapter's limits.
-        let mut per_row = vec![0u64; tiles_y as usize];
-        for g in proj {
-            let span = u64::from(g.bbox.x1 / TILE - g.bbox.x0 / TILE + 1);
-            for ty in g.bbox.y0 / TILE..=g.bbox.y1 / TILE {
-                per_row[ty as usize] += span;
-            }
-        }
-        let row_bytes = u64::from(width) * u64::from(TILE) * 12;
-        let gaussian_bytes = proj.len() as u64 * 48;
-        if gaussian_bytes > self.max_binding
-            || row_bytes > self.max_binding
-            || tiles_x > self.max_groups
-        {
-            return Err(too_big(&self.info, "one tile row"));
-        }
-        let (gaussians, boxes) = upload_layout(proj);
-        let g_buf = self.storage(bytemuck::cast_slice(&gaussians));
-        let b_buf = self.storage(bytemuck::cast_slice(&boxes));
-        let mut ty = 0u32;
-        while ty < tiles_y {
-            // Grow the band while its index list and output fit in one binding.
-            let (mut end, mut entries) = (ty, 0u64);
-            while end < tiles_y
-                && end - ty < self.max_groups
-                && (entries + per_row[end as usize]) * 4 <= self.max_binding
-                && u64::from(end - ty + 1) * row_bytes <= self.max_binding
-            {
-                entries += per_row[end as usize];
-                end += 1;
-            }
-            if end == ty {
-                return Err(too_big(&self.info, "the tile lists of one tile row"));
-            }
-            let rows = ((end * TILE).min(height) - ty * TILE) as usize;
-            let band =
-                &mut data[(ty * TILE) as usize * width as usize * 3..][..rows * width as usize * 3];
-            self.render_band(
-                proj,
-                (&g_buf, &b_buf),
-                blend,
-                (width, height, tiles_x),
-                ty..end,
-                band,
-            )?;
-            ty = end;
-        }
-        Ok(RgbImage {
-            width,
-            height,
-            data,
+            })
         })
     }
 
-    fn storage(&self, bytes: &[u8]) -> wgpu::Buffer {
-        // A binding may not be empty.
+    /// A storage buffer holding `bytes` (16 zero bytes when empty: a binding may not be),
+    /// which kernels may read and write and the host may copy to and from.
+    pub(crate) fn storage(&self, bytes: &[u8]) -> wgpu::Buffer {
         let bytes = if bytes.is_empty() {
             &[0u8; 16][..]
         } else {
@@ -327,7 +322,9 @@ impl Gpu {
             .create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: None,
                 contents: bytes,
-                usage: wgpu::BufferUsages::STORAGE,
+                usage: wgpu::BufferUsages::STORAGE
+                    | wgpu::BufferUsages::COPY_SRC
+                    | wgpu::BufferUsages::COPY_DST,
             })
     }
 
@@ -376,60 +373,51 @@ impl Gpu {
         height: u32,
         dl_dimage: &[f32],
     ) -> Result<Vec<[f32; 9]>> {
-        self.checked(|| self.backward_unchecked(proj, blend, width, height, dl_dimage))
-    }
-
-    fn backward_unchecked(
-        &self,
-        proj: &[Projected],
-        blend: Blend,
-        width: u32,
-        height: u32,
-        dl_dimage: &[f32],
-    ) -> Result<Vec<[f32; 9]>> {
-        assert_eq!(dl_dimage.len(), width as usize * height as usize * 3);
-        let tiles_x = width.div_ceil(TILE);
-        let tiles_y = height.div_ceil(TILE);
-        if tiles_x.max(tiles_y) > self.max_groups {
-            return Err(too_big(&self.info, "the backward pass of this image"));
-        }
-        let (offsets, indices) = tile_lists(proj, tiles_x, 0..tiles_y);
-        let mut slots = vec![0.0f32; indices.len() * 9];
-        if proj.is_empty() || indices.is_empty() {
-            return Ok(vec![[0.0; 9]; proj.len()]);
-        }
-        for bytes in [
-            slots.len() as u64 * 4,
-            dl_dimage.len() as u64 * 4,
-            indices.len() as u64 * 4,
-        ] {
-            if bytes > self.max_binding {
+        self.checked(|| {
+            assert_eq!(dl_dimage.len(), width as usize * height as usize * 3);
+            let tiles_x = width.div_ceil(TILE);
+            let tiles_y = height.div_ceil(TILE);
+            if tiles_x.max(tiles_y) > self.max_groups {
                 return Err(too_big(&self.info, "the backward pass of this image"));
             }
-        }
-        let (gaussians, boxes) = upload_layout(proj);
-        let params = [width, height, tiles_x, 0u32];
-        let inputs = [
-            self.uniform_buffer(bytemuck::cast_slice(&params)),
-            self.storage(bytemuck::cast_slice(&gaussians)),
-            self.storage(bytemuck::cast_slice(&boxes)),
-            self.storage(bytemuck::cast_slice(&offsets)),
-            self.storage(bytemuck::cast_slice(&indices)),
-            self.storage(bytemuck::cast_slice(dl_dimage)),
-        ];
-        self.run(
-            self.backward_kernel(blend),
-            &inputs,
-            (tiles_x, tiles_y),
-            &mut slots,
-        )?;
-        let mut out = vec![[0.0f32; 9]; proj.len()];
-        for (k, slot) in indices.iter().zip(slots.chunks_exact(9)) {
-            for (o, s) in out[*k as usize].iter_mut().zip(slot) {
-                *o += s;
+            let (offsets, indices) = tile_lists(proj, tiles_x, 0..tiles_y);
+            let mut slots = vec![0.0f32; indices.len() * 9];
+            if proj.is_empty() || indices.is_empty() {
+                return Ok(vec![[0.0; 9]; proj.len()]);
             }
-        }
-        Ok(out)
+            for bytes in [
+                slots.len() as u64 * 4,
+                dl_dimage.len() as u64 * 4,
+                indices.len() as u64 * 4,
+            ] {
+                if bytes > self.max_binding {
+                    return Err(too_big(&self.info, "the backward pass of this image"));
+                }
+            }
+            let (gaussians, boxes) = upload_layout(proj);
+            let params = [width, height, tiles_x, 0u32];
+            let inputs = [
+                self.uniform_buffer(bytemuck::cast_slice(&params)),
+                self.storage(bytemuck::cast_slice(&gaussians)),
+                self.storage(bytemuck::cast_slice(&boxes)),
+                self.storage(bytemuck::cast_slice(&offsets)),
+                self.storage(bytemuck::cast_slice(&indices)),
+                self.storage(bytemuck::cast_slice(dl_dimage)),
+            ];
+            self.run(
+                self.backward_kernel(blend),
+                &inputs,
+                (tiles_x, tiles_y),
+                &mut slots,
+            )?;
+            let mut out = vec![[0.0f32; 9]; proj.len()];
+            for (k, slot) in indices.iter().zip(slots.chunks_exact(9)) {
+                for (o, s) in out[*k as usize].iter_mut().zip(slot) {
+                    *o += s;
+                }
+            }
+            Ok(out)
+        })
     }
 
     /// Bind `inputs` then an output buffer the size of `out`, dispatch `groups`
@@ -445,10 +433,7 @@ impl Gpu {
         let buffers: Vec<&wgpu::Buffer> = inputs.iter().chain(std::iter::once(&out_buf)).collect();
         let bind = kernel.bind(&self.device, &buffers);
         let mut enc = self.encoder();
-        {
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
-            kernel.dispatch(&mut pass, &bind, groups);
-        }
+        self.pass(&mut enc, &[(kernel, &bind, groups)]);
         let [bytes] = self.read_back(enc, [&out_buf])?;
         out.copy_from_slice(&bytemuck::cast_slice::<u8, f32>(&bytes)[..out.len()]);
         Ok(())
@@ -557,6 +542,15 @@ impl Gpu {
         out
     }
 
+    /// Record into `enc` one compute pass running `dispatches` in order (wgpu orders
+    /// each dispatch's reads after the writes of the ones before it).
+    pub(crate) fn pass(&self, enc: &mut wgpu::CommandEncoder, dispatches: &[Dispatch<'_>]) {
+        let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
+        for (kernel, bind, groups) in dispatches {
+            kernel.dispatch(&mut pass, bind, *groups);
+        }
+    }
+
     /// A command encoder for one submission.
     pub(crate) fn encoder(&self) -> wgpu::CommandEncoder {
         self.device
@@ -592,6 +586,9 @@ impl Gpu {
         self.fit.get_or_init(|| fit::FitKernels::new(&self.device))
     }
 }
+
+/// A kernel, what it is bound to, and its workgroups.
+pub(crate) type Dispatch<'a> = (&'a Kernel, &'a wgpu::BindGroup, (u32, u32));
 
 /// A compute pipeline and the layout of its one bind group.
 pub(crate) struct Kernel {

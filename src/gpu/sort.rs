@@ -211,16 +211,7 @@ mod tests {
     use super::super::tests::gpu;
 
     fn buffer(gpu: &super::super::Gpu, data: &[u32]) -> wgpu::Buffer {
-        // A binding may not be empty.
-        let data = if data.is_empty() { &[0u32][..] } else { data };
-        gpu.device
-            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: None,
-                contents: bytemuck::cast_slice(data),
-                usage: wgpu::BufferUsages::STORAGE
-                    | wgpu::BufferUsages::COPY_SRC
-                    | wgpu::BufferUsages::COPY_DST,
-            })
+        gpu.storage(bytemuck::cast_slice(data))
     }
 
     fn read(gpu: &super::super::Gpu, buf: &wgpu::Buffer, len: usize) -> Vec<u32> {
