@@ -133,7 +133,7 @@ impl Layout {
     }
 }
 
-/// Adam over a flat vector, with the update skipped for non-finite gradients.
+/// Adam over a flat vector (non-finite gradients count as 0).
 struct FlatAdam {
     m: Vec<f32>,
     v: Vec<f32>,
@@ -150,16 +150,10 @@ impl FlatAdam {
     }
 
     fn update(&mut self, p: &mut [f32], g: &[f32], lr: f32) {
-        const B1: f32 = 0.9;
-        const B2: f32 = 0.999;
         self.step += 1;
-        let c1 = 1.0 - B1.powi(self.step);
-        let c2 = 1.0 - B2.powi(self.step);
+        let rule = crate::fit::params::AdamRule::at(0.9, 0.999, 1e-8, self.step);
         for ((p, &g), (m, v)) in p.iter_mut().zip(g).zip(self.m.iter_mut().zip(&mut self.v)) {
-            let g = if g.is_finite() { g } else { 0.0 };
-            *m = B1 * *m + (1.0 - B1) * g;
-            *v = B2 * *v + (1.0 - B2) * g * g;
-            *p -= lr * (*m / c1) / ((*v / c2).sqrt() + 1e-8);
+            rule.update(p, g, m, v, lr);
         }
     }
 }
@@ -218,7 +212,9 @@ pub struct Session<'a> {
     grad: Vec<f32>,
     head_act: Vec<f32>,
     colors: Vec<[f32; 3]>,
+    /// The render, and the render as a display shows it (clamped).
     img: Vec<f32>,
+    shown: Vec<f32>,
     g_img: Vec<f32>,
     g_col: Vec<[f32; 3]>,
     g_map: Vec<f32>,
@@ -283,6 +279,7 @@ impl<'a> Session<'a> {
             head_act: vec![0.0; cells * opts.head_hidden],
             colors: vec![[0.0; 3]; n],
             img: vec![0.0; low.len()],
+            shown: vec![0.0; low.len()],
             g_img: vec![0.0; low.len()],
             g_col: vec![[0.0; 3]; n],
             g_map: vec![0.0; cells * opts.experts],
@@ -330,7 +327,9 @@ impl<'a> Session<'a> {
             );
         }
         self.a.render(&self.colors, &mut self.img);
-        let terms = self.loss.eval_display(&mut self.img, &mut self.g_img);
+        let terms = self
+            .loss
+            .eval_display(&self.img, &mut self.shown, &mut self.g_img);
         self.a.transpose(&self.g_img, &mut self.g_col);
         self.grad.fill(0.0);
         self.g_map.fill(0.0);
@@ -473,13 +472,15 @@ impl<'a> Session<'a> {
         let g = &self.scene.gaussians;
         let colors = enhancer.apply(&g.positions, &g.colors);
         self.a.render(&colors, &mut self.img);
-        let terms = self.loss.eval_display(&mut self.img, &mut self.g_img);
+        let terms = self
+            .loss
+            .eval_display(&self.img, &mut self.shown, &mut self.g_img);
         Fitted {
             record,
             enhancer,
             colors,
             terms,
-            mean_luma: (mean_luma(&self.low), mean_luma(&self.img)),
+            mean_luma: (mean_luma(&self.low), mean_luma(&self.shown)),
         }
     }
 }

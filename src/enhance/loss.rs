@@ -245,6 +245,24 @@ struct Terms64 {
     total: f64,
 }
 
+impl From<Terms64> for ImageTerms {
+    fn from(t: Terms64) -> ImageTerms {
+        ImageTerms {
+            exposure: sat(t.exposure),
+            hue: sat(t.hue),
+            spatial: sat(t.spatial),
+            colour: sat(t.colour),
+            contrast: sat(t.contrast),
+            total: sat(t.total),
+        }
+    }
+}
+
+/// The luma of channel means (the mean luma of their image).
+fn luma_of(mean: [f64; 3]) -> f64 {
+    LUMA[0] * mean[0] + LUMA[1] * mean[1] + LUMA[2] * mean[2]
+}
+
 impl ImageLoss {
     /// Prepares the loss against `low` (`width × height × 3` floats, interleaved RGB,
     /// row-major).
@@ -325,7 +343,7 @@ impl ImageLoss {
             low_gx,
             low_gy,
             low_std,
-            low_luma: LUMA[0] * mean[0] + LUMA[1] * mean[1] + LUMA[2] * mean[2],
+            low_luma: luma_of(mean),
         }
     }
 
@@ -350,15 +368,7 @@ impl ImageLoss {
     ///
     /// If `img` or `grad` does not hold `width * height * 3` floats.
     pub fn eval(&self, img: &[f32], grad: &mut [f32]) -> ImageTerms {
-        let t = self.eval_f64(img, grad);
-        ImageTerms {
-            exposure: sat(t.exposure),
-            hue: sat(t.hue),
-            spatial: sat(t.spatial),
-            colour: sat(t.colour),
-            contrast: sat(t.contrast),
-            total: sat(t.total),
-        }
+        self.eval_f64(img, grad).into()
     }
 
     /// [`ImageLoss::eval`] with the values left in `f64` (the tests difference them).
@@ -367,40 +377,48 @@ impl ImageLoss {
     }
 
     /// The loss of `raw` as an 8-bit display shows it: every term is scored on `raw`
-    /// clamped to `[0, 1]` except exposure, which is scored on `raw` itself.
+    /// clamped to `[0, 1]`, which is written to `shown`, except exposure, which is
+    /// scored on `raw` itself.
     ///
     /// The gradient is exact for that function: zero through the clamp for the four
     /// terms that see the clamped image. Exposure sees past the clamp so that an
     /// over-exposed image is pulled back: scored on the clamped image, a fit that
-    /// overshoots into white has no gradient left to return with. `raw` is clamped in
-    /// place.
-    pub fn eval_display(&self, raw: &mut [f32], grad: &mut [f32]) -> ImageTerms {
-        let unclamped = raw.to_vec();
-        for x in raw.iter_mut() {
-            *x = x.clamp(0.0, 1.0);
+    /// overshoots into white has no gradient left to return with.
+    ///
+    /// # Panics
+    ///
+    /// If `raw`, `shown` or `grad` does not hold `width * height * 3` floats.
+    pub fn eval_display(&self, raw: &[f32], shown: &mut [f32], grad: &mut [f32]) -> ImageTerms {
+        assert_eq!(shown.len(), raw.len(), "ImageLoss::eval_display: shown");
+        // One pass clamps and sums the unclamped channels, in `channel_sums`' order.
+        let mut sums = [0f64; 3];
+        for (r, s) in raw.chunks_exact(3).zip(shown.chunks_exact_mut(3)) {
+            for c in 0..3 {
+                sums[c] += f64::from(r[c]);
+                s[c] = r[c].clamp(0.0, 1.0);
+            }
         }
-        let t = self.eval_parts(raw, Some(&unclamped), grad);
+        let t = self.eval_parts(shown, Some(sums), grad);
         for (i, (g, (&r, &c))) in grad
             .iter_mut()
-            .zip(unclamped.iter().zip(raw.iter()))
+            .zip(raw.iter().zip(shown.iter()))
             .enumerate()
         {
             if r != c {
                 *g = sat(t.exposure_slope * LUMA[i % 3]);
             }
         }
-        ImageTerms {
-            exposure: sat(t.exposure),
-            hue: sat(t.hue),
-            spatial: sat(t.spatial),
-            colour: sat(t.colour),
-            contrast: sat(t.contrast),
-            total: sat(t.total),
-        }
+        t.into()
     }
 
-    /// [`ImageLoss::eval_f64`], with the exposure term scored on `exposure_of` when given.
-    fn eval_parts(&self, img: &[f32], exposure_of: Option<&[f32]>, grad: &mut [f32]) -> Terms64 {
+    /// [`ImageLoss::eval_f64`], with the exposure term scored on the image whose channel
+    /// sums are `exposure_sums`, when given.
+    fn eval_parts(
+        &self,
+        img: &[f32],
+        exposure_sums: Option<[f64; 3]>,
+        grad: &mut [f32],
+    ) -> Terms64 {
         let (w, h) = (self.width, self.height);
         let len = w * h * 3;
         assert_eq!(
@@ -453,7 +471,7 @@ impl ImageLoss {
         // The brightness ratio s that the low image's gradients are scaled by, and
         // ds/d x for a value of channel c (LUMA[c] · ds_dmean); 0 for a black low image.
         let (ratio, ds_dmean) = if self.low_luma > LOW_LUMA_MIN {
-            let luma = LUMA[0] * mean[0] + LUMA[1] * mean[1] + LUMA[2] * mean[2];
+            let luma = luma_of(mean);
             (luma / self.low_luma, 1.0 / (n * self.low_luma))
         } else {
             (1.0, 0.0)
@@ -520,20 +538,8 @@ impl ImageLoss {
 
         // Exposure (Eq. 17): the mean luma is the luma of the channel means.
         let p = &self.params;
-        let exposure_mean = match exposure_of {
-            None => mean,
-            Some(e) => {
-                let mut sum = [0f64; 3];
-                for p in e.chunks_exact(3) {
-                    for c in 0..3 {
-                        sum[c] += f64::from(p[c]);
-                    }
-                }
-                sum.map(|s| s / n)
-            }
-        };
-        let luma =
-            LUMA[0] * exposure_mean[0] + LUMA[1] * exposure_mean[1] + LUMA[2] * exposure_mean[2];
+        let exposure_mean = exposure_sums.map_or(mean, |s| s.map(|s| s / n));
+        let luma = luma_of(exposure_mean);
         let off = luma - p.exposure_target as f64;
         let exposure = off * off;
         let k_exposure = wt.exposure as f64 * 2.0 * off / n;

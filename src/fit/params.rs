@@ -161,14 +161,9 @@ impl Adam {
 
     pub fn step(&mut self, params: &mut GaussianSet, grads: &GaussianSet, lr: &LearningRates) {
         self.step += 1;
-        let (b1, b2, eps) = (self.beta1, self.beta2, self.eps);
-        let c1 = 1.0 - b1.powi(self.step);
-        let c2 = 1.0 - b2.powi(self.step);
+        let rule = AdamRule::at(self.beta1, self.beta2, self.eps, self.step);
         let update = |p: &mut f32, g: f32, m: &mut f32, v: &mut f32, lr: f32| {
-            let g = if g.is_finite() { g } else { 0.0 };
-            *m = b1 * *m + (1.0 - b1) * g;
-            *v = b2 * *v + (1.0 - b2) * g * g;
-            *p -= lr * (*m / c1) / ((*v / c2).sqrt() + eps);
+            rule.update(p, g, m, v, lr)
         };
         for i in 0..params.len() {
             for k in 0..2 {
@@ -211,6 +206,41 @@ impl Adam {
                 params.cov[i][k] = params.cov[i][k].clamp(LN_SIGMA_MIN, LN_SIGMA_MAX);
             }
         }
+    }
+}
+
+/// Adam's update rule at one step: the one home of its arithmetic, shared by this
+/// optimizer and stage 2's (`enhance::fit`).
+#[derive(Clone, Copy)]
+pub(crate) struct AdamRule {
+    b1: f32,
+    b2: f32,
+    eps: f32,
+    /// Bias corrections `1 − β^t`.
+    c1: f32,
+    c2: f32,
+}
+
+impl AdamRule {
+    /// The rule at step `t` (counted from 1).
+    pub(crate) fn at(b1: f32, b2: f32, eps: f32, t: i32) -> AdamRule {
+        AdamRule {
+            b1,
+            b2,
+            eps,
+            c1: 1.0 - b1.powi(t),
+            c2: 1.0 - b2.powi(t),
+        }
+    }
+
+    /// Move `p` along gradient `g` with moments `m`, `v`; a non-finite gradient counts
+    /// as 0.
+    #[inline]
+    pub(crate) fn update(&self, p: &mut f32, g: f32, m: &mut f32, v: &mut f32, lr: f32) {
+        let g = if g.is_finite() { g } else { 0.0 };
+        *m = self.b1 * *m + (1.0 - self.b1) * g;
+        *v = self.b2 * *v + (1.0 - self.b2) * g * g;
+        *p -= lr * (*m / self.c1) / ((*v / self.c2).sqrt() + self.eps);
     }
 }
 
