@@ -5,17 +5,9 @@
 
 use gsi::metrics::{self, MetricError, Rgb8};
 
-/// A small deterministic generator (tests must not depend on a random crate's stream).
-struct Lcg(u64);
-impl Lcg {
-    fn next(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
+mod common;
+
+use common::Lcg;
 
 /// An interleaved RGB reference in `[0, 1]` with some structure, and an image that is
 /// the reference plus noise (correlated with it, as a fit is).

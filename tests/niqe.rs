@@ -4,23 +4,9 @@
 
 use gsi::metrics::{self, MetricError, Rgb8, NIQE_PATCH};
 
-/// A small deterministic generator (tests must not depend on a random crate's stream).
-struct Lcg(u64);
-impl Lcg {
-    fn next(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
-    /// Standard normal (Box–Muller).
-    fn normal(&mut self) -> f64 {
-        let u = 1.0 - self.next();
-        let v = self.next();
-        (-2.0 * u.ln()).sqrt() * (2.0 * std::f64::consts::PI * v).cos()
-    }
-}
+mod common;
+
+use common::Lcg;
 
 fn niqe_of(w: u32, h: u32, data: &[u8]) -> Result<f64, MetricError> {
     metrics::niqe(Rgb8::new(w, h, data).unwrap())

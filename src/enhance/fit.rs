@@ -903,17 +903,6 @@ mod tests {
     use crate::model::Blend;
     use crate::synth::{random_scene, SceneSpec};
 
-    /// The whole chain (head, softmax, bilinear taps, operators, clamps, `A`, losses)
-    /// against central differences of the total loss.
-    fn session_layout(opts: &EnhanceOptions) -> Layout {
-        Layout {
-            dim: 32,
-            head_hidden: opts.head_hidden,
-            experts: opts.experts,
-            hidden: opts.hidden,
-        }
-    }
-
     /// The backward pass from the recorded activations equals the one that evaluates the
     /// operators again (what sets past [`TRACE_BYTES_MAX`] use), bit for bit.
     #[test]
@@ -1012,6 +1001,8 @@ mod tests {
         }
     }
 
+    /// The whole chain (head, softmax, bilinear taps, operators, clamps, `A`, losses)
+    /// against central differences of the total loss.
     #[test]
     fn chain_gradient_matches_finite_differences() {
         let only = |k: usize| {
@@ -1043,6 +1034,7 @@ mod tests {
             };
             let bank = super::super::features::FeatureBank;
             let mut session = Session::new(&scene, &opts, &bank);
+            let theta = session.theta.clone();
             // The total loss of `theta`, with its gradient.
             let mut eval = |theta: &[f32]| {
                 session.theta.copy_from_slice(theta);
@@ -1052,7 +1044,6 @@ mod tests {
                     f64::from(t.total) + f64::from(w.tv * m.tv) + f64::from(w.entropy * m.entropy);
                 (total, session.grad.clone())
             };
-            let theta = init(&session_layout(&opts), opts.seed);
             // Move well off the identity start: there every |difference| of the hue
             // and spatial terms sits at its kink, where differences are meaningless.
             let mut rng = SplitMix64::new(4);

@@ -162,9 +162,8 @@ impl Adam {
     pub fn step(&mut self, params: &mut GaussianSet, grads: &GaussianSet, lr: &LearningRates) {
         self.step += 1;
         let rule = AdamRule::at(self.beta1, self.beta2, self.eps, self.step);
-        let update = |p: &mut f32, g: f32, m: &mut f32, v: &mut f32, lr: f32| {
-            rule.update(p, g, m, v, lr)
-        };
+        let update =
+            |p: &mut f32, g: f32, m: &mut f32, v: &mut f32, lr: f32| rule.update(p, g, m, v, lr);
         for i in 0..params.len() {
             for k in 0..2 {
                 update(

@@ -30,3 +30,21 @@ pub fn image(w: u32, h: u32, f: impl Fn(u32, u32) -> [f32; 3]) -> gsi::fit::Targ
         data,
     }
 }
+
+/// A small deterministic generator (tests must not depend on a random crate's stream).
+pub struct Lcg(pub u64);
+impl Lcg {
+    pub fn next(&mut self) -> f64 {
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64
+    }
+    /// Standard normal (Box–Muller).
+    pub fn normal(&mut self) -> f64 {
+        let u = 1.0 - self.next();
+        let v = self.next();
+        (-2.0 * u.ln()).sqrt() * (2.0 * std::f64::consts::PI * v).cos()
+    }
+}

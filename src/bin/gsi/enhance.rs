@@ -92,9 +92,10 @@ pub fn run(args: Args) -> Result<(), Failure> {
             args.exposure
         )));
     }
-    if !(1..=64).contains(&args.experts) {
+    let most = usize::from(gsi::format::MAX_EXPERTS);
+    if !(1..=most).contains(&args.experts) {
         return Err(Failure(format!(
-            "--experts {} must be in 1..=64",
+            "--experts {} must be in 1..={most}",
             args.experts
         )));
     }

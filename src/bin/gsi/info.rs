@@ -64,6 +64,7 @@ fn finite_or_null(x: f32) -> serde_json::Value {
 fn to_json(f: &GsiFile) -> serde_json::Value {
     let h = &f.records.header;
     let m = measured(f);
+    let stage = stage2(f);
     let quantizers = |a: &gsi::format::Attribute| {
         a.quantizers
             .iter()
@@ -88,7 +89,7 @@ fn to_json(f: &GsiFile) -> serde_json::Value {
         "cr_bytes": finite_or_null(m.cr_bytes),
         "psnr": f.metadata.as_ref().and_then(|s| s.psnr).map(finite_or_null),
         "encoder_settings": f.metadata.as_ref().map(|s| s.settings.clone()),
-        "enhancer": match stage2(f).enhancer {
+        "enhancer": match stage.enhancer {
             None => serde_json::Value::Null,
             Some(Err(e)) => json!({"error": e}),
             Some(Ok(e)) => json!({
@@ -97,7 +98,7 @@ fn to_json(f: &GsiFile) -> serde_json::Value {
                 "map": [e.map_width, e.map_height],
                 "iterations": e.fit.iterations,
                 "exposure": e.fit.exposure,
-                "revertible": stage2(f).revertible,
+                "revertible": stage.revertible,
             }),
         },
         "quantizers": {
