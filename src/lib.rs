@@ -9,9 +9,28 @@
 //!
 //! # Embedding the decoder
 //!
-//! With `default-features = false` the crate is the decoder alone: container, model and
-//! CPU renderer, depending on `bitvec`, `byteorder`, `crc32fast` and `zstd` only. Add the
-//! `parallel` feature to render tiles on all cores with rayon.
+//! The default features give the decoder (container, model, CPU renderer on all cores with
+//! rayon) and the C API, depending on `bitvec`, `byteorder`, `crc32fast`, `zstd` and
+//! `rayon` only; `default-features = false` drops rayon. The stages are features: `encode`
+//! (fitting and enhancement), `gpu` (wgpu), `image` (`image::open` of `.gsi` files, see
+//! [`image_support`]). The `gsi` command-line tool is the separate `gsi-cli` package.
+//!
+//! One call decodes a file from any reader at any size, with limits suited to untrusted
+//! input; a [`Reader`] renders into buffers you own, in 8-bit RGB/RGBA or `f32`:
+//!
+//! ```
+//! # let bytes = gsi::format::tests_support::tiny_file();
+//! let image = gsi::decode(&bytes[..], 400, 300)?; // 8-bit RGB
+//! assert_eq!(image.data.len(), 400 * 300 * 3);
+//!
+//! let mut reader = gsi::Reader::new(&bytes[..])?;
+//! reader.set_pixel_format(gsi::PixelFormat::Rgba8);
+//! let mut buf = vec![0u8; reader.output_buffer_size()?]; // at the stored size
+//! reader.read_image(&mut buf)?;
+//! # Ok::<(), gsi::Error>(())
+//! ```
+//!
+//! Underneath, the layers are public too.
 //!
 //! Open from any reader, with limits suited to untrusted input, and look at the header
 //! before committing to the rest:
@@ -66,17 +85,46 @@
 //! From C, the same decoder is `include/gsi.h` (feature `capi`, in the staticlib and
 //! cdylib); `examples/c/decode.c` shows its use.
 
-pub mod enhance;
+// The layers, lowest first (README "Layers"; `tools/check-layers.py` keeps them one-way):
+// contract -> model -> format -> render -> decode, gpu -> {optim, metrics} -> fit, enhance
+// -> capi, image_support. The command-line tool (`cli/`) is an application on top.
+// (rustfmt sorts the declarations below; the order above is the one that matters.)
+pub mod contract;
+mod decode;
 #[cfg(feature = "encode")]
-pub mod fit;
+pub mod device;
 pub mod format;
 #[cfg(feature = "gpu")]
 pub mod gpu;
-pub mod metrics;
+#[cfg(feature = "image")]
+pub mod image_support;
 pub mod model;
 pub mod render;
+
+// Stage 2: applying and reverting a stored enhancer is in every build, fitting one is
+// feature `encode`.
+pub mod enhance;
+#[cfg(feature = "encode")]
+pub mod fit;
+#[cfg(feature = "encode")]
+pub mod metrics;
+#[cfg(feature = "encode")]
+pub mod optim;
+#[cfg(feature = "encode")]
+pub(crate) mod rng;
+
+/// Deterministic test data (random scenes, the corpus); for tests, benches and tools, never
+/// used by the library itself.
+#[cfg(feature = "encode")]
 #[doc(hidden)]
 pub mod synth;
 
 #[cfg(feature = "capi")]
 pub mod capi;
+
+pub use decode::{decode, Image, PixelFormat, Reader};
+#[cfg(feature = "encode")]
+pub use device::Device;
+pub use format::{Error, ErrorKind, Header, Limits, Result};
+pub use model::{Blend, CovParam, GaussianSet, Scene};
+pub use render::{render, RgbImage};

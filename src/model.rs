@@ -9,6 +9,8 @@
 //! turns parameters into a covariance matrix under the clamps of `format-spec.md` §6,
 //! which guarantee a finite, positive-definite result for *any* finite input.
 
+use crate::contract::{CHOLESKY_MAX, LN_SIGMA_MAX, LN_SIGMA_MIN};
+
 /// How overlapping Gaussians combine into a pixel colour.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Blend {
@@ -72,12 +74,6 @@ impl CovParam {
         }
     }
 }
-
-/// Largest magnitude of a Cholesky entry, in normalized units (16 image widths).
-pub const CHOLESKY_MAX: f32 = 16.0;
-/// Range of `ln σ` in normalized units: `e^-30` is far below any pixel, `e^3` is 20 images.
-pub const LN_SIGMA_MIN: f32 = -30.0;
-pub const LN_SIGMA_MAX: f32 = 3.0;
 
 /// A set of 2D Gaussians, structure of arrays. All vectors have the same length.
 #[derive(Clone, Debug, Default, PartialEq)]

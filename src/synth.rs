@@ -1,37 +1,10 @@
 //! Deterministic random Gaussian sets, for the corpus, benchmarks, fuzzing and tests.
 //!
-//! The generator is SplitMix64, fixed here rather than taken from a crate, so that the
-//! checked-in corpus and its golden hashes never change with a dependency upgrade.
+//! The generator is the crate's own [`SplitMix64`], so that the checked-in corpus and its
+//! golden hashes never change with a dependency upgrade.
 
 use crate::model::{Blend, CovParam, GaussianSet, Scene};
-
-/// SplitMix64 (Steele, Lea & Flood 2014): a tiny, fully specified 64-bit generator.
-#[derive(Clone, Debug)]
-pub struct SplitMix64(u64);
-
-impl SplitMix64 {
-    pub fn new(seed: u64) -> Self {
-        SplitMix64(seed)
-    }
-
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in `[0, 1)` with 24 bits of precision.
-    pub fn unit(&mut self) -> f32 {
-        (self.next_u64() >> 40) as f32 * (1.0 / (1u64 << 24) as f32)
-    }
-
-    /// Uniform in `[lo, hi)`.
-    pub fn range(&mut self, lo: f32, hi: f32) -> f32 {
-        lo + (hi - lo) * self.unit()
-    }
-}
+pub use crate::rng::SplitMix64;
 
 /// Shape of a random scene.
 #[derive(Clone, Copy, Debug)]

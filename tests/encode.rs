@@ -71,7 +71,7 @@ fn degenerate_images_encode_to_finite_files() {
                     init,
                     ..opts(Budget::Gaussians(20), 30, blend)
                 };
-                let e = encode(t, &o, &mut |p| {
+                let e = encode(t, &o, gsi::Device::Cpu, &mut |p| {
                     assert!(p.loss.is_finite(), "{name}: loss {}", p.loss)
                 })
                 .unwrap_or_else(|e| panic!("{name} {blend:?}: {e}"));
@@ -96,7 +96,7 @@ fn fitting_improves_and_the_stored_psnr_is_the_decoded_one() {
             loss,
             ..opts(Budget::Gaussians(120), 150, blend)
         };
-        let e = encode(&t, &o, &mut |p| {
+        let e = encode(&t, &o, gsi::Device::Cpu, &mut |p| {
             first.get_or_insert(p.psnr);
         })
         .unwrap();
@@ -128,12 +128,17 @@ fn fitting_improves_and_the_stored_psnr_is_the_decoded_one() {
 fn the_same_seed_gives_the_same_file() {
     let t = scene_like(40, 30);
     let o = opts(Budget::Gaussians(60), 40, Blend::Alpha);
-    let a = encode(&t, &o, &mut |_| {}).unwrap().bytes;
-    let b = encode(&t, &o, &mut |_| {}).unwrap().bytes;
+    let a = encode(&t, &o, gsi::Device::Cpu, &mut |_| {}).unwrap().bytes;
+    let b = encode(&t, &o, gsi::Device::Cpu, &mut |_| {}).unwrap().bytes;
     assert_eq!(a, b);
-    let c = encode(&t, &EncodeOptions { seed: 1, ..o }, &mut |_| {})
-        .unwrap()
-        .bytes;
+    let c = encode(
+        &t,
+        &EncodeOptions { seed: 1, ..o },
+        gsi::Device::Cpu,
+        &mut |_| {},
+    )
+    .unwrap()
+    .bytes;
     assert_ne!(a, c);
 }
 
@@ -142,7 +147,13 @@ fn budgets_choose_the_number_of_gaussians() {
     let t = scene_like(96, 64);
     let px = 96.0 * 64.0;
     for bpp in [2.0f32, 4.0] {
-        let e = encode(&t, &opts(Budget::Bpp(bpp), 60, Blend::Sum), &mut |_| {}).unwrap();
+        let e = encode(
+            &t,
+            &opts(Budget::Bpp(bpp), 60, Blend::Sum),
+            gsi::Device::Cpu,
+            &mut |_| {},
+        )
+        .unwrap();
         let got = e.bytes.len() as f32 * 8.0 / px;
         assert!(got <= bpp, "asked {bpp} bpp, got {got}");
         assert!(got > 0.5 * bpp, "asked {bpp} bpp, got only {got}");
@@ -152,12 +163,14 @@ fn budgets_choose_the_number_of_gaussians() {
     let e_flat = encode(
         &flat,
         &opts(Budget::TargetPsnr(35.0), 60, Blend::Sum),
+        gsi::Device::Cpu,
         &mut |_| {},
     )
     .unwrap();
     let e_busy = encode(
         &t,
         &opts(Budget::TargetPsnr(35.0), 60, Blend::Sum),
+        gsi::Device::Cpu,
         &mut |_| {},
     )
     .unwrap();
@@ -181,6 +194,7 @@ fn opacity_is_not_stored_when_not_needed() {
     let e = encode(
         &t,
         &opts(Budget::Gaussians(30), 20, Blend::Sum),
+        gsi::Device::Cpu,
         &mut |_| {},
     )
     .unwrap();
@@ -188,6 +202,7 @@ fn opacity_is_not_stored_when_not_needed() {
     let e = encode(
         &t,
         &opts(Budget::Gaussians(30), 20, Blend::Alpha),
+        gsi::Device::Cpu,
         &mut |_| {},
     )
     .unwrap();

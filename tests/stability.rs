@@ -4,9 +4,10 @@
 //! degenerate and extreme values; deterministic tests cover the edge images and the
 //! optimizer's extremes.
 
+use gsi::contract::COLOR_MAX;
 use gsi::format::{self, Attribute, Limits, Quantizer, Records};
 use gsi::model::{Blend, CovParam, GaussianSet, Scene};
-use gsi::render::{render, COLOR_MAX};
+use gsi::render::render;
 use proptest::prelude::*;
 
 mod common;
@@ -162,7 +163,7 @@ mod fitting {
 
     fn finite_curve(name: &str, opts: &EncodeOptions, t: &Target) -> Vec<f32> {
         let mut losses = Vec::new();
-        let e = encode(t, opts, &mut |p| {
+        let e = encode(t, opts, gsi::Device::Cpu, &mut |p| {
             assert!(p.loss.is_finite(), "{name}: loss {}", p.loss);
             assert!(!p.psnr.is_nan(), "{name}: PSNR NaN");
             losses.push(p.loss);

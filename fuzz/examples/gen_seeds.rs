@@ -2,7 +2,7 @@
 //! both blend modes, both covariance parameterizations, opacity or none, 0..=24-bit
 //! quantizers, stored and zstd payloads, `gCRM` or none, and an unknown ancillary chunk.
 //!
-//! `cargo run --manifest-path fuzz/Cargo.toml --example gen_seeds [OUT_DIR]`
+//! `cargo run --manifest-path fuzz/Cargo.toml --features seeds --example gen_seeds [OUT_DIR]`
 //!
 //! `parse/` gets the files as they are; `decode/` gets each with a two-byte prefix that
 //! the `decode` target reads as its output size.

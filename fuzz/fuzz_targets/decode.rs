@@ -7,8 +7,9 @@
 
 mod common;
 
+use gsi::contract::TRANSMITTANCE_MIN;
 use gsi::model::{Blend, Scene};
-use gsi::render::{project_scene, render, TRANSMITTANCE_MIN};
+use gsi::render::{project_scene, render};
 use libfuzzer_sys::fuzz_target;
 
 /// Largest `Gaussians × pixels` for which the per-pixel reference is run.

@@ -14,7 +14,8 @@ use super::mixture::{clamp_for, tap, Enhancer, MapTap, GAIN_LOG_MAX};
 use super::operator::ColorOperator;
 use crate::format::{EnhancerRecord, FitSettings, MAX_EXPERTS};
 use crate::model::Scene;
-use crate::synth::SplitMix64;
+use crate::optim::FlatAdam;
+use crate::rng::SplitMix64;
 
 /// How an enhancer is fitted. The defaults are the paper's where it gives them (K = 16,
 /// the loss weights) and measured choices elsewhere (E = 0.5, the learning rate, the
@@ -78,6 +79,8 @@ pub struct Fitted {
     pub terms: ImageTerms,
     /// Mean luma of the working image before and after.
     pub mean_luma: (f32, f32),
+    /// Why the fit left the GPU it was given for the CPU, if it did.
+    pub fallback: Option<String>,
 }
 
 /// The working size for an image of `width × height`: scaled so the long side is at
@@ -133,36 +136,14 @@ impl Layout {
     }
 }
 
-/// Adam over a flat vector (non-finite gradients count as 0).
-struct FlatAdam {
-    m: Vec<f32>,
-    v: Vec<f32>,
-    step: i32,
-}
-
-impl FlatAdam {
-    fn new(n: usize) -> Self {
-        FlatAdam {
-            m: vec![0.0; n],
-            v: vec![0.0; n],
-            step: 0,
-        }
-    }
-
-    fn update(&mut self, p: &mut [f32], g: &[f32], lr: f32) {
-        self.step += 1;
-        let rule = crate::fit::params::AdamRule::at(0.9, 0.999, 1e-8, self.step);
-        for ((p, &g), (m, v)) in p.iter_mut().zip(g).zip(self.m.iter_mut().zip(&mut self.v)) {
-            rule.update(p, g, m, v, lr);
-        }
-    }
-}
-
 /// Gaussians per parallel work item. Fixed, so that gradients are summed in the same
 /// order whatever the thread count and the fit is reproducible from its seed.
 const CHUNK: usize = 512;
 
-/// Fit an enhancer to `scene` and return it with the colours it produces.
+/// Fit an enhancer to `scene` and return it with the colours it produces, with the
+/// mixture (weights and operators, forward and backward) on `device`. Where the GPU
+/// cannot hold the mixture, or fails later, the fit goes on on the CPU and
+/// [`Fitted::fallback`] says why.
 ///
 /// # Panics
 /// If `opts.experts` is 0 or above 64, or `opts.hidden`/`head_hidden` is 0 or above 64.
@@ -170,22 +151,21 @@ pub fn fit(
     scene: &Scene,
     opts: &EnhanceOptions,
     backbone: &dyn Backbone,
-    progress: &mut dyn FnMut(&Progress),
-) -> Fitted {
-    fit_with(scene, opts, backbone, &mut |_| {}, progress)
-}
-
-/// [`fit`], with `setup` applied to the session before the first iteration (to move its
-/// mixture to a GPU).
-pub(crate) fn fit_with<'a>(
-    scene: &'a Scene,
-    opts: &EnhanceOptions,
-    backbone: &dyn Backbone,
-    setup: &mut dyn FnMut(&mut Session<'a>),
+    device: crate::Device<'_>,
     progress: &mut dyn FnMut(&Progress),
 ) -> Fitted {
     let mut session = Session::new(scene, opts, backbone);
-    setup(&mut session);
+    match device {
+        crate::Device::Cpu => {}
+        #[cfg(feature = "gpu")]
+        crate::Device::Gpu(gpu) => {
+            if let Err(e) = session.use_gpu(gpu) {
+                session.fallback = Some(format!("enhancement runs on the CPU: {e}"));
+            }
+        }
+        #[cfg(not(feature = "gpu"))]
+        crate::Device::_Lifetime(_) => {}
+    }
     for _ in 0..opts.iterations {
         progress(&session.step());
     }
@@ -221,9 +201,11 @@ pub struct Session<'a> {
     /// The forward pass's activations, per chunk of Gaussians, for the backward pass to
     /// reuse; `None` where they would take more than [`TRACE_BYTES_MAX`].
     traces: Option<Vec<Trace>>,
+    /// Why the session left its GPU for the CPU, once it has.
+    fallback: Option<String>,
     /// Where the mixture runs, when not on the CPU ([`Session::use_gpu`]).
     #[cfg(feature = "gpu")]
-    gpu: Option<crate::gpu::enhance::GpuMixture<'a>>,
+    gpu: Option<super::gpu::GpuMixture<'a>>,
 }
 
 impl<'a> Session<'a> {
@@ -284,6 +266,7 @@ impl<'a> Session<'a> {
             g_col: vec![[0.0; 3]; n],
             g_map: vec![0.0; cells * opts.experts],
             traces: Trace::for_chunks(n, opts.experts, opts.hidden),
+            fallback: None,
             #[cfg(feature = "gpu")]
             gpu: None,
             a,
@@ -372,7 +355,7 @@ impl<'a> Session<'a> {
     #[cfg(feature = "gpu")]
     pub fn use_gpu(&mut self, gpu: &'a crate::gpu::Gpu) -> crate::format::Result<()> {
         let e = &self.enh;
-        self.gpu = Some(crate::gpu::enhance::GpuMixture::new(
+        self.gpu = Some(super::gpu::GpuMixture::new(
             gpu,
             e.experts,
             e.hidden,
@@ -431,7 +414,8 @@ impl<'a> Session<'a> {
 
     #[cfg(feature = "gpu")]
     fn gpu_failed(&mut self, e: &crate::format::Error) {
-        eprintln!("gsi: enhancement continues on the CPU: {e}");
+        self.fallback
+            .get_or_insert_with(|| format!("enhancement continues on the CPU: {e}"));
         self.gpu = None;
         let n = self.scene.gaussians.len();
         self.traces = Trace::for_chunks(n, self.opts.experts, self.opts.hidden);
@@ -481,6 +465,7 @@ impl<'a> Session<'a> {
             colors,
             terms,
             mean_luma: (mean_luma(&self.low), mean_luma(&self.shown)),
+            fallback: self.fallback.take(),
         }
     }
 }

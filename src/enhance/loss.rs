@@ -937,11 +937,11 @@ mod tests {
 
     /// SplitMix64: a tiny deterministic generator, so the tests need no crate.
     /// SplitMix64 with the two draws these tests need (53-bit uniforms, indices).
-    struct Rng(crate::synth::SplitMix64);
+    struct Rng(crate::rng::SplitMix64);
 
     impl Rng {
         fn new(seed: u64) -> Rng {
-            Rng(crate::synth::SplitMix64::new(seed))
+            Rng(crate::rng::SplitMix64::new(seed))
         }
 
         fn next(&mut self) -> u64 {

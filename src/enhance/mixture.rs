@@ -290,7 +290,7 @@ mod tests {
     use super::*;
 
     fn sample(experts: usize, hidden: usize) -> Enhancer {
-        let mut rng = crate::synth::SplitMix64::new(3);
+        let mut rng = crate::rng::SplitMix64::new(3);
         let per = Enhancer::params_per_operator(hidden);
         Enhancer {
             experts,

@@ -16,6 +16,8 @@ pub mod mixture;
 pub mod features;
 #[cfg(feature = "encode")]
 pub mod fit;
+#[cfg(all(feature = "encode", feature = "gpu"))]
+pub mod gpu;
 #[cfg(feature = "encode")]
 pub mod loss;
 #[cfg(feature = "encode")]
@@ -73,48 +75,21 @@ pub fn apply_from(
     rewrite(target, &base, &colors, &record, keep_original)
 }
 
-/// Fit an enhancer to the file's (original) colours and return the rewritten file with
-/// what the fit did. The caller decides beforehand whether the image needs it
-/// ([`fit::scene_luma`] against [`LOW_LIGHT_LUMA`]).
+/// Fit an enhancer to the file's (original) colours, with its mixture on `device`, and
+/// return the rewritten file with what the fit did. The caller decides beforehand whether
+/// the image needs it ([`fit::scene_luma`] against [`LOW_LIGHT_LUMA`]).
 #[cfg(feature = "encode")]
 pub fn enhance(
     file: &ChunkedFile,
     opts: &fit::EnhanceOptions,
     keep_original: bool,
     limits: &Limits,
+    device: crate::Device<'_>,
     progress: &mut dyn FnMut(&fit::Progress),
 ) -> Result<(Vec<u8>, fit::Fitted)> {
     let base = base_records(file, limits)?;
     let scene = base.to_scene();
-    let fitted = fit::fit(&scene, opts, &features::FeatureBank, progress);
-    let bytes = rewrite(file, &base, &fitted.colors, &fitted.record, keep_original)?;
-    Ok((bytes, fitted))
-}
-
-/// [`enhance`] with the mixture on `gpu` ([`fit::Session::use_gpu`]); where the adapter
-/// cannot hold it, says so and runs on the CPU.
-#[cfg(all(feature = "encode", feature = "gpu"))]
-pub fn enhance_on_gpu(
-    file: &ChunkedFile,
-    opts: &fit::EnhanceOptions,
-    keep_original: bool,
-    limits: &Limits,
-    gpu: &crate::gpu::Gpu,
-    progress: &mut dyn FnMut(&fit::Progress),
-) -> Result<(Vec<u8>, fit::Fitted)> {
-    let base = base_records(file, limits)?;
-    let scene = base.to_scene();
-    let fitted = fit::fit_with(
-        &scene,
-        opts,
-        &features::FeatureBank,
-        &mut |s| {
-            if let Err(e) = s.use_gpu(gpu) {
-                eprintln!("gsi: enhancement runs on the CPU: {e}");
-            }
-        },
-        progress,
-    );
+    let fitted = fit::fit(&scene, opts, &features::FeatureBank, device, progress);
     let bytes = rewrite(file, &base, &fitted.colors, &fitted.record, keep_original)?;
     Ok((bytes, fitted))
 }

@@ -4,9 +4,9 @@
 //! one render; afterwards an enhancement iteration renders with a sparse product and
 //! back-propagates with its transpose, never touching a Gaussian's shape again.
 
-use crate::fit::raster::Tiles;
+use crate::contract::{COLOR_MAX, TRANSMITTANCE_MIN};
 use crate::model::{Blend, Scene};
-use crate::render::{project_scene, COLOR_MAX, TRANSMITTANCE_MIN};
+use crate::render::{project_scene, TileLists};
 
 /// `A` in compressed-row form: row `p` (pixel `p`, row-major) holds the Gaussians that
 /// reach it and their weights, in blending order.
@@ -24,14 +24,14 @@ impl ColorOperator {
     /// decoder), so `A·c` is what `gsi decode` would show at that size.
     pub fn new(scene: &Scene, width: u32, height: u32) -> ColorOperator {
         let proj = project_scene(scene, width, height);
-        let tiles = Tiles::bin(&proj, width, height);
+        let tiles = TileLists::bin(&proj, width, height);
         let tile = crate::render::TILE;
         let mut row_start = Vec::with_capacity((width * height) as usize + 1);
         let (mut gaussian, mut weight) = (Vec::new(), Vec::new());
         row_start.push(0);
         for j in 0..height {
             for i in 0..width {
-                let list = &tiles.lists[((j / tile) * tiles.tiles_x + i / tile) as usize];
+                let list = tiles.list(((j / tile) * tiles.tiles_x + i / tile) as usize);
                 let mut t = 1.0f32;
                 for &k in list {
                     let g = &proj[k as usize];
@@ -146,7 +146,7 @@ mod tests {
     fn the_transpose_is_the_adjoint() {
         let scene = random_scene(8, SceneSpec::new(30, 20, 40, Blend::Alpha));
         let a = ColorOperator::new(&scene, 30, 20);
-        let mut rng = crate::synth::SplitMix64::new(1);
+        let mut rng = crate::rng::SplitMix64::new(1);
         let c: Vec<[f32; 3]> = (0..40)
             .map(|_| [rng.unit(), rng.unit(), rng.unit()])
             .collect();

@@ -8,7 +8,7 @@
 
 use super::Target;
 use crate::model::{Blend, GaussianSet};
-use crate::synth::SplitMix64;
+use crate::rng::SplitMix64;
 
 /// How the Gaussians are initialized.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -20,13 +20,16 @@ pub mod loss;
 pub mod lsq;
 pub mod params;
 pub mod raster;
+#[cfg(feature = "gpu")]
+pub mod resident;
 
+pub use crate::optim::LearningRates;
 pub use init::Init;
 pub use loss::Loss;
-pub use params::LearningRates;
 
 use crate::format::{self, BitDepths, Error, ErrorKind, Records, WriteOptions};
 use crate::model::{Blend, CovParam, GaussianSet, Scene};
+use crate::optim::{self, Adam};
 use crate::render::{project_scene, Projected, RgbImage};
 use raster::Need;
 
@@ -104,6 +107,8 @@ pub struct Encoded {
     /// PSNR (dB, 8-bit RGB) of the decoded file against the target.
     pub psnr: f64,
     pub curve: Vec<Progress>,
+    /// Why the fit left the GPU it was given for the CPU, if it did.
+    pub fallback: Option<String>,
 }
 
 /// Bit depths for an image: positions to 1/8 pixel of the longer side.
@@ -140,16 +145,18 @@ pub struct Fitter<'a> {
     /// The parameters. While a GPU fit is resident they are those of its last
     /// [`Fitter::sync`], and what is written here is lost at the next one.
     pub params: GaussianSet,
-    adam: params::Adam,
+    adam: Adam,
     loss: loss::LossFn,
     seed: u64,
+    /// Why the fitter left its GPU for the CPU, once it has.
+    fallback: Option<String>,
     /// Where [`Fitter::step`] runs, when not on the CPU.
     #[cfg(feature = "gpu")]
     gpu: Option<&'a crate::gpu::Gpu>,
     /// The L2 fit living on the GPU between [`Fitter::sync`]s; while it exists,
     /// `params` and `adam` are those of the last sync.
     #[cfg(feature = "gpu")]
-    resident: Option<crate::gpu::fit::ResidentFit<'a>>,
+    resident: Option<resident::ResidentFit<'a>>,
 }
 
 impl<'a> Fitter<'a> {
@@ -162,7 +169,7 @@ impl<'a> Fitter<'a> {
         seed: u64,
     ) -> Fitter<'a> {
         let params = init::initialize(target, n, init, blend, seed);
-        let adam = params::Adam::new(&params);
+        let adam = Adam::new(&params);
         let mut f = Fitter {
             target,
             blend,
@@ -170,6 +177,7 @@ impl<'a> Fitter<'a> {
             adam,
             loss: loss::LossFn::new(loss),
             seed,
+            fallback: None,
             #[cfg(feature = "gpu")]
             gpu: None,
             #[cfg(feature = "gpu")]
@@ -250,19 +258,24 @@ impl<'a> Fitter<'a> {
         let scene = self.scene_of(used);
         let projected = project_scene(&scene, w, h);
         let (value, psnr, pg) = self.passes(&projected, measure);
-        let mut grads = params::zero_grads(&self.params);
+        let mut grads = optim::zeros_like(&self.params);
         params::chain(&scene.gaussians, &projected, &pg, w, h, &mut grads);
         self.adam.step(&mut self.params, &grads, lr);
         psnr.map(|p| (value, p))
     }
 
     /// Take this fitter's steps on `gpu`. With the L2 loss the whole step runs there
-    /// ([`crate::gpu::fit`]) and the state comes back only at [`Fitter::sync`]; with the
+    /// ([`resident`]) and the state comes back only at [`Fitter::sync`]; with the
     /// MS-SSIM loss the render and backward passes run there and the rest on the CPU.
-    /// If the GPU fails, the fitter says so once and continues on the CPU.
+    /// If the GPU fails, the fitter continues on the CPU and [`Fitter::fallback`] says why.
     #[cfg(feature = "gpu")]
     pub fn use_gpu(&mut self, gpu: &'a crate::gpu::Gpu) {
         self.gpu = Some(gpu);
+    }
+
+    /// Why the fitter left its GPU for the CPU, if it did.
+    pub fn fallback(&self) -> Option<&str> {
+        self.fallback.as_deref()
     }
 
     /// Bring the parameters and Adam's state back from the GPU, if they live there, so
@@ -274,7 +287,7 @@ impl<'a> Fitter<'a> {
             match resident.download() {
                 Ok((params, adam)) => {
                     self.params = params;
-                    self.adam.set_state(adam);
+                    self.adam = adam;
                 }
                 Err(e) => self.gpu_failed(&e),
             }
@@ -295,14 +308,8 @@ impl<'a> Fitter<'a> {
             return None;
         }
         if self.resident.is_none() {
-            let state = self.adam.state();
-            match crate::gpu::fit::ResidentFit::new(
-                gpu,
-                self.target,
-                self.blend,
-                &self.params,
-                &state,
-            ) {
+            match resident::ResidentFit::new(gpu, self.target, self.blend, &self.params, &self.adam)
+            {
                 Ok(r) => self.resident = Some(r),
                 Err(e) => {
                     self.gpu_failed(&e);
@@ -318,7 +325,7 @@ impl<'a> Fitter<'a> {
                 // last sync.
                 if let Some(Ok((params, adam))) = self.resident.take().map(|r| r.download()) {
                     self.params = params;
-                    self.adam.set_state(adam);
+                    self.adam = adam;
                 }
                 self.gpu_failed(&e);
                 None
@@ -328,7 +335,8 @@ impl<'a> Fitter<'a> {
 
     #[cfg(feature = "gpu")]
     fn gpu_failed(&mut self, e: &Error) {
-        eprintln!("gsi: fitting continues on the CPU: {e}");
+        self.fallback
+            .get_or_insert_with(|| format!("fitting continues on the CPU: {e}"));
         self.gpu = None;
         self.resident = None;
     }
@@ -405,7 +413,7 @@ impl<'a> Fitter<'a> {
             keep[i] = score[i] >= min_score;
         }
         let removed = keep.iter().filter(|k| !**k).count();
-        params::retain(&mut self.params, &keep);
+        optim::retain(&mut self.params, &keep);
         let grow = n.saturating_sub(self.params.len());
         self.adam.resize(&keep, 0);
         if grow > 0 {
@@ -426,7 +434,7 @@ impl<'a> Fitter<'a> {
             .zip(t.data.chunks_exact(3))
             .map(|(a, b)| (0..3).map(|c| (a[c] - b[c]).powi(2)).sum())
             .collect();
-        let mut rng = crate::synth::SplitMix64::new(self.seed ^ self.params.len() as u64);
+        let mut rng = crate::rng::SplitMix64::new(self.seed ^ self.params.len() as u64);
         let picks = init::stratified(&err, w, h, k, &mut rng);
         let n_all = (self.params.len() + k) as f32;
         let sigma = (0.35 * ((w * h) as f32 / n_all).sqrt()).max(0.5);
@@ -459,32 +467,16 @@ fn schedule(it: u32, total: u32) -> f32 {
     0.05 + 0.95 * 0.5 * (1.0 + (std::f32::consts::PI * t).cos())
 }
 
-/// Fit `target` and write the file.
+/// Fit `target` and write the file, with the optimizer steps on `device`.
+///
+/// On a GPU ([`Fitter::use_gpu`]) the whole step runs there with the L2 loss, the render
+/// and backward passes with MS-SSIM; initialization, colour solves, pruning and the final
+/// measurement stay on the CPU. A GPU that fails is left for the CPU, and
+/// [`Encoded::fallback`] says why.
 pub fn encode(
     target: &Target,
     opts: &EncodeOptions,
-    on_progress: &mut dyn FnMut(&Progress),
-) -> Result<Encoded, Error> {
-    encode_inner(target, opts, &mut |_| {}, on_progress)
-}
-
-/// [`encode`] with the optimizer steps on `gpu` ([`Fitter::use_gpu`]: the whole step with
-/// the L2 loss, the render and backward passes with MS-SSIM); initialization, colour
-/// solves, pruning and the final measurement stay on the CPU.
-#[cfg(feature = "gpu")]
-pub fn encode_on_gpu(
-    target: &Target,
-    opts: &EncodeOptions,
-    gpu: &crate::gpu::Gpu,
-    on_progress: &mut dyn FnMut(&Progress),
-) -> Result<Encoded, Error> {
-    encode_inner(target, opts, &mut |f| f.use_gpu(gpu), on_progress)
-}
-
-fn encode_inner<'a>(
-    target: &'a Target,
-    opts: &EncodeOptions,
-    setup: &mut dyn FnMut(&mut Fitter<'a>),
+    device: crate::Device<'_>,
     on_progress: &mut dyn FnMut(&Progress),
 ) -> Result<Encoded, Error> {
     check_target(target)?;
@@ -500,7 +492,13 @@ fn encode_inner<'a>(
     };
     let start = std::time::Instant::now();
     let mut fitter = Fitter::new(target, n, opts.init, opts.blend, opts.loss, opts.seed);
-    setup(&mut fitter);
+    match device {
+        crate::Device::Cpu => {}
+        #[cfg(feature = "gpu")]
+        crate::Device::Gpu(gpu) => fitter.use_gpu(gpu),
+        #[cfg(not(feature = "gpu"))]
+        crate::Device::_Lifetime(_) => {}
+    }
     let mut curve = Vec::new();
     let mut report =
         |it: u32, total: u32, n: usize, loss: f32, psnr: f64, curve: &mut Vec<Progress>| {
@@ -575,6 +573,7 @@ fn encode_inner<'a>(
         result = finish(&mut fitter, bits, opts)?;
     }
     result.curve = curve;
+    result.fallback = fitter.fallback.take();
     Ok(result)
 }
 
@@ -586,7 +585,7 @@ fn finish(fitter: &mut Fitter, bits: BitDepths, opts: &EncodeOptions) -> Result<
     // A Gaussian whose whole contribution is under one 8-bit step changes nothing visible.
     let (score, _) = fitter.contributions();
     let keep: Vec<bool> = score.iter().map(|&s| s >= 1.0 / 255.0).collect();
-    params::retain(&mut scene.gaussians, &keep);
+    optim::retain(&mut scene.gaussians, &keep);
     let records = Records::from_scene(&scene, bits);
     let decoded = crate::render::render(&records.to_scene(), t.width, t.height)?;
     if !decoded.data.iter().all(|v| v.is_finite()) {
@@ -622,6 +621,7 @@ fn finish(fitter: &mut Fitter, bits: BitDepths, opts: &EncodeOptions) -> Result<
         bytes,
         psnr,
         curve: Vec::new(),
+        fallback: None,
     })
 }
 

@@ -11,8 +11,9 @@
 //! own gradient slots and they are summed in a fixed order afterwards, so results do not
 //! depend on the number of threads.
 
+use crate::contract::{ALPHA_MAX, ALPHA_MIN, TRANSMITTANCE_MIN};
 use crate::model::Blend;
-use crate::render::{Projected, Rect, ALPHA_MAX, ALPHA_MIN, TILE, TRANSMITTANCE_MIN};
+use crate::render::{Projected, Rect, TileLists, TILE};
 use std::ops::Range;
 
 #[cfg(feature = "parallel")]
@@ -52,35 +53,6 @@ impl ProjGrad {
     }
 }
 
-/// Per-tile lists of projected-Gaussian indices, in stored order.
-pub struct Tiles {
-    pub tiles_x: u32,
-    pub tiles_y: u32,
-    /// `lists[t]` for tile `t = ty * tiles_x + tx`.
-    pub lists: Vec<Vec<u32>>,
-}
-
-impl Tiles {
-    pub fn bin(projected: &[Projected], width: u32, height: u32) -> Tiles {
-        let tiles_x = width.div_ceil(TILE);
-        let tiles_y = height.div_ceil(TILE);
-        let mut lists = vec![Vec::new(); (tiles_x * tiles_y) as usize];
-        for (k, g) in projected.iter().enumerate() {
-            let b = g.bbox;
-            for ty in b.y0 / TILE..=b.y1 / TILE {
-                for tx in b.x0 / TILE..=b.x1 / TILE {
-                    lists[(ty * tiles_x + tx) as usize].push(k as u32);
-                }
-            }
-        }
-        Tiles {
-            tiles_x,
-            tiles_y,
-            lists,
-        }
-    }
-}
-
 /// What the backward pass needs from the forward pass.
 pub struct Forward {
     pub width: u32,
@@ -88,7 +60,7 @@ pub struct Forward {
     pub blend: Blend,
     /// Interleaved RGB, not clamped.
     pub image: Vec<f32>,
-    pub tiles: Tiles,
+    pub(crate) tiles: TileLists,
     /// `alpha` blending: final transmittance of each pixel.
     final_t: Vec<f32>,
     /// `alpha` blending: one past the last position in its tile's list that contributed.
@@ -157,7 +129,7 @@ fn row_alphas(
 
 /// Render `projected` and keep what the backward pass needs.
 pub fn forward(projected: &[Projected], blend: Blend, width: u32, height: u32) -> Forward {
-    let tiles = Tiles::bin(projected, width, height);
+    let tiles = TileLists::bin(projected, width, height);
     let alpha_mode = blend == Blend::Alpha;
     if !alpha_mode {
         // `sum` needs nothing but the image: the decoder's own renderer makes it.
@@ -182,7 +154,7 @@ pub fn forward(projected: &[Projected], blend: Blend, width: u32, height: u32) -
         let mut acc = [0f32; TILE_PIXELS * 3];
         let mut trans = [1f32; TILE_PIXELS];
         let mut last = [0u32; TILE_PIXELS];
-        for (pos, &k) in tiles.lists[t].iter().enumerate() {
+        for (pos, &k) in tiles.list(t).iter().enumerate() {
             let g = &projected[k as usize];
             let Some((xs, ys)) = g.bbox.clip(rect) else {
                 continue;
@@ -209,7 +181,7 @@ pub fn forward(projected: &[Projected], blend: Blend, width: u32, height: u32) -
         }
         (acc, trans, last)
     };
-    let n_tiles = tiles.lists.len();
+    let n_tiles = tiles.len();
     #[cfg(feature = "parallel")]
     let done: Vec<_> = (0..n_tiles).into_par_iter().map(per_tile).collect();
     #[cfg(not(feature = "parallel"))]
@@ -261,7 +233,7 @@ pub fn backward(
     let all = need == Need::All;
     // One gradient slot per entry of each tile list, summed in a fixed order below.
     let per_tile = |t: usize| -> Vec<ProjGrad> {
-        let list = &tiles.lists[t];
+        let list = tiles.list(t);
         let mut out = vec![ProjGrad::default(); list.len()];
         if list.is_empty() {
             return out;
@@ -379,13 +351,13 @@ pub fn backward(
         }
         out
     };
-    let n_tiles = tiles.lists.len();
+    let n_tiles = tiles.len();
     #[cfg(feature = "parallel")]
     let slots: Vec<Vec<ProjGrad>> = (0..n_tiles).into_par_iter().map(per_tile).collect();
     #[cfg(not(feature = "parallel"))]
     let slots: Vec<Vec<ProjGrad>> = (0..n_tiles).map(per_tile).collect();
     let mut grads = vec![ProjGrad::default(); projected.len()];
-    for (list, slot) in tiles.lists.iter().zip(&slots) {
+    for (list, slot) in tiles.iter().zip(&slots) {
         for (&k, g) in list.iter().zip(slot) {
             grads[k as usize].add(g);
         }

@@ -1,8 +1,9 @@
 //! Gradient checks and forward equivalence for the differentiable rasterizer.
 
-use super::params::{chain, zero_grads};
+use super::params::chain;
 use super::raster::{backward, forward, Need};
 use crate::model::{Blend, CovParam, GaussianSet, Scene};
+use crate::optim::zeros_like as zero_grads;
 use crate::render::{project_scene, render};
 use crate::synth::{random_scene, SceneSpec, SplitMix64};
 

@@ -246,7 +246,7 @@ fn check_shape(experts: u8, hidden: u8, map_width: u16, map_height: u16) -> Resu
 }
 
 fn check_clamp([lo, hi]: [f32; 2]) -> Result<()> {
-    let max = crate::render::COLOR_MAX;
+    let max = crate::contract::COLOR_MAX;
     if !(lo.is_finite() && hi.is_finite() && -max <= lo && lo < hi && hi <= max) {
         return Err(invalid(format!("operator clamp [{lo}, {hi}]")));
     }

@@ -50,6 +50,20 @@ impl Limits {
         }
     }
 
+    /// Refuse an allocation of `bytes` for `what` over `max_alloc`.
+    pub fn check_alloc(&self, bytes: u64, what: &str) -> Result<()> {
+        if bytes > self.max_alloc {
+            return Err(Error::new(
+                ErrorKind::LimitExceeded,
+                format!(
+                    "{what} needs {bytes} bytes, over the allocation limit of {}",
+                    self.max_alloc
+                ),
+            ));
+        }
+        Ok(())
+    }
+
     /// Refuse an output size of more than `max_output_pixels` (or a zero dimension).
     pub fn check_output(&self, width: u32, height: u32) -> Result<()> {
         if width == 0 || height == 0 {

@@ -6,12 +6,104 @@
 //! Kernels: `fit_range` (quantization-aware steps only), `fit_project`, `fit_scan`,
 //! `fit_emit`, the radix sort ([`super::sort`]), `fit_tiles`, then `render`.
 
-use super::fit::{FitUniform, STRIDE};
-use super::sort::SortPlan;
-use super::{too_big, Dispatch, Gpu};
+use super::sort::{RadixSort, SortPlan};
+use super::{too_big, Dispatch, Gpu, Kernel};
 use crate::format::{Error, ErrorKind, Limits, Result};
+use crate::model::Blend;
 use crate::model::{CovParam, GaussianSet, Scene};
-use crate::render::RgbImage;
+use crate::render::{RgbImage, TILE};
+
+/// Floats per Gaussian in the parameter and moment buffers (`STRIDE` of
+/// `fit_common.wgsl`): u, v, ln σ1, ln σ2, θ, r, g, b, opacity.
+pub(crate) const STRIDE: usize = 9;
+/// Invocations per workgroup of the one-dimensional kernels (`GROUP`).
+pub(crate) const GROUP: u32 = 256;
+
+/// The pipelines of the forward half (projection, binning, tile ranges), built the first
+/// time a resident pipeline runs on a device.
+pub(crate) struct ForwardKernels {
+    pub range: Kernel,
+    pub project: Kernel,
+    pub scan: Kernel,
+    pub emit: Kernel,
+    pub tiles: Kernel,
+    pub sort: RadixSort,
+}
+
+impl ForwardKernels {
+    fn new(device: &wgpu::Device) -> ForwardKernels {
+        let k = |label, source: String, reads, writes| {
+            Kernel::new(device, label, &source, reads, writes)
+        };
+        ForwardKernels {
+            range: k("fit_range", shader!("fit_common", "fit_range"), 1, 1),
+            project: k("fit_project", shader!("fit_common", "fit_project"), 2, 3),
+            scan: k("fit_scan", shader!("fit_common", "fit_scan"), 1, 2),
+            emit: k("fit_emit", shader!("fit_common", "fit_emit"), 2, 2),
+            tiles: k("fit_tiles", shader!("fit_common", "fit_tiles"), 2, 1),
+            sort: RadixSort::new(device),
+        }
+    }
+
+    pub(crate) fn of(gpu: &Gpu) -> &ForwardKernels {
+        gpu.forward.get_or_init(|| ForwardKernels::new(&gpu.device))
+    }
+}
+
+/// The uniform block `Fit` of `fit_common.wgsl`, shared by the forward half and the
+/// optimizer step (`fit::resident`).
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+pub(crate) struct FitUniform {
+    pub width: u32,
+    pub height: u32,
+    pub tiles_x: u32,
+    pub tiles_y: u32,
+    pub count: u32,
+    pub capacity: u32,
+    pub blend: u32,
+    pub has_opacity: u32,
+    pub qat: u32,
+    pub bits: [u32; 4],
+    pub lr: [f32; 5],
+    pub c1: f32,
+    pub c2: f32,
+    pub beta1: f32,
+    pub beta2: f32,
+    pub eps: f32,
+    pub cholesky: u32,
+}
+
+impl FitUniform {
+    /// `count` Gaussians drawn at `width × height`; no step taken yet.
+    pub(crate) fn new(
+        width: u32,
+        height: u32,
+        count: usize,
+        blend: Blend,
+        has_opacity: bool,
+    ) -> FitUniform {
+        FitUniform {
+            width,
+            height,
+            tiles_x: width.div_ceil(TILE),
+            tiles_y: height.div_ceil(TILE),
+            count: count as u32,
+            capacity: 0,
+            blend: u32::from(blend == Blend::Alpha),
+            has_opacity: u32::from(has_opacity),
+            qat: 0,
+            bits: [0; 4],
+            lr: [0.0; 5],
+            c1: 1.0,
+            c2: 1.0,
+            beta1: 0.0,
+            beta2: 0.0,
+            eps: 0.0,
+            cholesky: 0,
+        }
+    }
+}
 
 /// Buffers and bindings of the forward half whose size the image and the number of
 /// Gaussians fix.
@@ -62,7 +154,7 @@ impl Forward {
             return Err(too_big(&gpu.info, "a dispatch over the tiles of this size"));
         }
         let device = &gpu.device;
-        let k = gpu.fit_kernels();
+        let k = ForwardKernels::of(gpu);
         let fit = gpu.uniform_buffer(bytemuck::bytes_of(uniform));
         let params = gpu.storage(bytemuck::cast_slice(params));
         let ranges = gpu.zeroed(STRIDE as u64 * 8);
@@ -109,7 +201,7 @@ impl Forward {
     /// The tile-list entries the Gaussians need as uploaded (a projection and a scan on
     /// the GPU, and one number read back).
     pub(crate) fn count_entries(&self, gpu: &Gpu) -> Result<u64> {
-        let k = gpu.fit_kernels();
+        let k = ForwardKernels::of(gpu);
         let mut enc = gpu.encoder();
         gpu.pass(
             &mut enc,
@@ -130,7 +222,7 @@ impl Forward {
         enc: &mut wgpu::CommandEncoder,
         quantized: bool,
     ) {
-        let k = gpu.fit_kernels();
+        let k = ForwardKernels::of(gpu);
         let range = (&k.range, &self.range, (1, 1));
         let rest = [
             (&k.project, &self.project, self.gaussian_groups),
@@ -148,7 +240,11 @@ impl Forward {
     /// The tile ranges and the render, to run after [`Forward::record_binning`].
     pub(crate) fn render<'a>(&'a self, gpu: &'a Gpu, lists: &'a ForwardLists) -> [Dispatch<'a>; 2] {
         [
-            (&gpu.fit_kernels().tiles, &lists.tiles, self.tile_groups),
+            (
+                &ForwardKernels::of(gpu).tiles,
+                &lists.tiles,
+                self.tile_groups,
+            ),
             (&gpu.render, &lists.render, self.tiles),
         ]
     }
@@ -170,7 +266,7 @@ impl ForwardLists {
             ));
         }
         let device = &gpu.device;
-        let k = gpu.fit_kernels();
+        let k = ForwardKernels::of(gpu);
         let keys = gpu.zeroed(u64::from(capacity) * 4);
         let values = gpu.zeroed(u64::from(capacity) * 4);
         let tiles = f.tiles.0 * f.tiles.1;

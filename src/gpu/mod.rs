@@ -23,25 +23,32 @@
 
 use crate::format::{Error, ErrorKind, Limits, Result};
 use crate::model::{Blend, Scene};
-use crate::render::{project_scene, Projected, RgbImage, TILE};
+use crate::render::{project_scene, Projected, RgbImage, TileLists, TILE};
 use wgpu::util::DeviceExt;
 
 /// A shader's source: the contract constants ([`contract`]), then the named files of
 /// `shaders/` in order (WGSL has no includes).
 macro_rules! shader {
     ($($name:literal),+) => {
-        $crate::gpu::with_contract(&[$(include_str!(concat!("../../shaders/", $name, ".wgsl"))),+])
+        $crate::gpu::with_contract(&[$(include_str!(concat!(
+            env!("CARGO_MANIFEST_DIR"), "/shaders/", $name, ".wgsl"
+        ))),+])
     };
 }
+pub(crate) use shader;
+
+/// u32 words per Gaussian in stage 2's `gauss` buffer (`GAUSS` of the shaders' prelude).
+pub(crate) const GAUSS: usize = 12;
+/// Largest K and hidden width stage 2's shaders' private arrays hold (`WIDTH_MAX`).
+pub(crate) const WIDTH_MAX: usize = 64;
 
 /// The constants of the pixel contract (format-spec.md §6), of the model and of the
 /// buffer layouts host and shaders share, written as WGSL from the Rust constants
 /// themselves, so that no shader can drift from the CPU or the host.
 fn contract() -> String {
-    use crate::model::{CHOLESKY_MAX, LN_SIGMA_MAX, LN_SIGMA_MIN};
-    use crate::render::{
-        ALPHA_MAX, ALPHA_MIN, COLOR_MAX, CORRELATION_MAX, EXTENT_SIGMAS, TRANSMITTANCE_MIN,
-        VAR_MAX, VAR_MIN,
+    use crate::contract::{
+        ALPHA_MAX, ALPHA_MIN, CHOLESKY_MAX, COLOR_MAX, CORRELATION_MAX, EXTENT_SIGMAS,
+        LN_SIGMA_MAX, LN_SIGMA_MIN, TRANSMITTANCE_MIN, VAR_MAX, VAR_MIN,
     };
     let floats = [
         ("ALPHA_MIN", ALPHA_MIN),
@@ -59,12 +66,12 @@ fn contract() -> String {
     let mut out = String::new();
     for (name, value) in [
         ("TILE", TILE),
-        ("GROUP", fit::GROUP),
-        ("STRIDE", fit::STRIDE as u32),
+        ("GROUP", forward::GROUP),
+        ("STRIDE", forward::STRIDE as u32),
         ("SLOT", SLOT as u32),
         ("SORT_BLOCK", sort::BLOCK),
-        ("GAUSS", enhance::GAUSS as u32),
-        ("WIDTH_MAX", enhance::WIDTH_MAX as u32),
+        ("GAUSS", GAUSS as u32),
+        ("WIDTH_MAX", WIDTH_MAX as u32),
     ] {
         out += &format!("const {name}: u32 = {value}u;\n");
     }
@@ -85,9 +92,7 @@ pub(crate) fn with_contract(parts: &[&str]) -> String {
     source
 }
 
-pub mod enhance;
-pub mod fit;
-mod forward;
+pub(crate) mod forward;
 mod sort;
 
 pub use forward::GpuScene;
@@ -110,20 +115,20 @@ pub(crate) const SLOT: usize = 9;
 
 /// A device with the render pipeline built, ready for any number of renders.
 pub struct Gpu {
-    device: wgpu::Device,
-    queue: wgpu::Queue,
+    pub(crate) device: wgpu::Device,
+    pub(crate) queue: wgpu::Queue,
     render: Kernel,
     backward_sum: Kernel,
     backward_alpha: Kernel,
-    info: wgpu::AdapterInfo,
+    pub(crate) info: wgpu::AdapterInfo,
     /// Largest storage binding, bytes.
-    max_binding: u64,
+    pub(crate) max_binding: u64,
     /// Most workgroups of a dispatch along one dimension.
-    max_groups: u32,
-    /// The fitting loop's pipelines, built when a fit first needs them.
-    fit: std::sync::OnceLock<fit::FitKernels>,
-    /// Stage 2's pipelines, likewise.
-    enhance: std::sync::OnceLock<enhance::EnhanceKernels>,
+    pub(crate) max_groups: u32,
+    /// The resident forward half's pipelines, built when first needed.
+    forward: std::sync::OnceLock<forward::ForwardKernels>,
+    /// The stages' kernel sets, built on first use, one per type ([`Gpu::kernels`]).
+    kernels: std::sync::Mutex<Vec<std::sync::Arc<dyn std::any::Any + Send + Sync>>>,
 }
 
 /// Uniform block of the shader (`Params` in `render.wgsl`).
@@ -195,8 +200,8 @@ impl Gpu {
             info,
             max_binding,
             max_groups: limits.max_compute_workgroups_per_dimension,
-            fit: std::sync::OnceLock::new(),
-            enhance: std::sync::OnceLock::new(),
+            forward: std::sync::OnceLock::new(),
+            kernels: std::sync::Mutex::new(Vec::new()),
         })
     }
 
@@ -338,7 +343,8 @@ impl Gpu {
         rows: std::ops::Range<u32>,
         out: &mut [f32],
     ) -> Result<()> {
-        let (offsets, indices) = tile_lists(proj, tiles_x, rows.clone());
+        let (offsets, lists) = tile_lists(proj, tiles_x, rows.clone())?;
+        let indices = lists.parts().1;
         let params = Params {
             width,
             height,
@@ -356,7 +362,7 @@ impl Gpu {
             g_buf.clone(),
             b_buf.clone(),
             self.storage(bytemuck::cast_slice(&offsets)),
-            self.storage(bytemuck::cast_slice(&indices)),
+            self.storage(bytemuck::cast_slice(indices)),
         ];
         self.run(&self.render, &inputs, (tiles_x, rows.end - rows.start), out)
     }
@@ -380,7 +386,8 @@ impl Gpu {
             if tiles_x.max(tiles_y) > self.max_groups {
                 return Err(too_big(&self.info, "the backward pass of this image"));
             }
-            let (offsets, indices) = tile_lists(proj, tiles_x, 0..tiles_y);
+            let (offsets, lists) = tile_lists(proj, tiles_x, 0..tiles_y)?;
+            let indices = lists.parts().1;
             let mut slots = vec![0.0f32; indices.len() * 9];
             if proj.is_empty() || indices.is_empty() {
                 return Ok(vec![[0.0; 9]; proj.len()]);
@@ -401,7 +408,7 @@ impl Gpu {
                 self.storage(bytemuck::cast_slice(&gaussians)),
                 self.storage(bytemuck::cast_slice(&boxes)),
                 self.storage(bytemuck::cast_slice(&offsets)),
-                self.storage(bytemuck::cast_slice(&indices)),
+                self.storage(bytemuck::cast_slice(indices)),
                 self.storage(bytemuck::cast_slice(dl_dimage)),
             ];
             self.run(
@@ -500,10 +507,10 @@ impl Gpu {
         Ok(out.try_into().expect("N parts"))
     }
 
-    /// Workgroups of [`fit::GROUP`] invocations for `n` items, laid out in two
+    /// Workgroups of [`forward::GROUP`] invocations for `n` items, laid out in two
     /// dimensions when one is not enough (kernels recover the linear index).
     pub(crate) fn groups(&self, n: u64) -> Result<(u32, u32)> {
-        let g = n.div_ceil(u64::from(fit::GROUP)).max(1);
+        let g = n.div_ceil(u64::from(forward::GROUP)).max(1);
         let max = u64::from(self.max_groups.max(1));
         let y = g.div_ceil(max);
         if y > max {
@@ -575,15 +582,21 @@ impl Gpu {
         }
     }
 
-    /// Stage 2's pipelines, built on first use.
-    pub(crate) fn enhance_kernels(&self) -> &enhance::EnhanceKernels {
-        self.enhance
-            .get_or_init(|| enhance::EnhanceKernels::new(&self.device))
-    }
-
-    /// The fitting loop's pipelines, built on first use.
-    pub(crate) fn fit_kernels(&self) -> &fit::FitKernels {
-        self.fit.get_or_init(|| fit::FitKernels::new(&self.device))
+    /// The kernel set of type `T`, built by `make` the first time it is asked for on this
+    /// device. Each stage keeps its kernels beside its code and asks for them here, so
+    /// that this device layer knows no stage.
+    pub(crate) fn kernels<T: std::any::Any + Send + Sync>(
+        &self,
+        make: impl FnOnce(&wgpu::Device) -> T,
+    ) -> std::sync::Arc<T> {
+        // A panic while building cannot leave a half-made entry: entries are pushed whole.
+        let mut cache = self.kernels.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(k) = cache.iter().find_map(|k| k.clone().downcast::<T>().ok()) {
+            return k;
+        }
+        let k = std::sync::Arc::new(make(&self.device));
+        cache.push(k.clone());
+        k
     }
 }
 
@@ -696,44 +709,25 @@ impl Kernel {
     }
 }
 
-/// Per-tile lists of projected-Gaussian indices (stored order) for tile rows `rows`:
-/// `offsets` (tiles + 1, prefix sums) and the concatenated `indices`.
+/// Per-tile lists of projected-Gaussian indices (stored order) for tile rows `rows`, from
+/// the crate's one binner ([`TileLists`]), with the offsets in the `u32` the shaders read.
 fn tile_lists(
     proj: &[Projected],
     tiles_x: u32,
     rows: std::ops::Range<u32>,
-) -> (Vec<u32>, Vec<u32>) {
-    let band_tiles = (tiles_x * (rows.end - rows.start)) as usize;
-    let mut offsets = vec![0u32; band_tiles + 1];
-    let tiles_of = |g: &Projected| {
-        let ys = (g.bbox.y0 / TILE).max(rows.start)..=(g.bbox.y1 / TILE).min(rows.end - 1);
-        let xs = g.bbox.x0 / TILE..=g.bbox.x1 / TILE;
-        let r0 = rows.start;
-        ys.flat_map(move |ty| {
-            xs.clone()
-                .map(move |tx| ((ty - r0) * tiles_x + tx) as usize)
-        })
-    };
-    for g in proj {
-        for t in tiles_of(g) {
-            offsets[t + 1] += 1;
-        }
-    }
-    for t in 1..offsets.len() {
-        offsets[t] += offsets[t - 1];
-    }
-    let mut fill = offsets.clone();
-    let mut indices = vec![0u32; offsets[band_tiles] as usize];
-    for (k, g) in proj.iter().enumerate() {
-        for t in tiles_of(g) {
-            indices[fill[t] as usize] = k as u32;
-            fill[t] += 1;
-        }
-    }
-    (offsets, indices)
+) -> Result<(Vec<u32>, TileLists)> {
+    let lists = TileLists::bin_rows(proj, tiles_x, rows);
+    let offsets = lists
+        .parts()
+        .0
+        .iter()
+        .map(|&o| u32::try_from(o))
+        .collect::<std::result::Result<Vec<u32>, _>>()
+        .map_err(|_| Error::new(ErrorKind::LimitExceeded, "more than 2^32 tile-list entries"))?;
+    Ok((offsets, lists))
 }
 
-fn too_big(info: &wgpu::AdapterInfo, what: &str) -> Error {
+pub(crate) fn too_big(info: &wgpu::AdapterInfo, what: &str) -> Error {
     Error::new(
         ErrorKind::LimitExceeded,
         format!(

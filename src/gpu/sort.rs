@@ -206,7 +206,7 @@ impl SortPlan {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::synth::SplitMix64;
+    use crate::rng::SplitMix64;
 
     use super::super::tests::gpu;
 

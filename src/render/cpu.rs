@@ -9,7 +9,8 @@
 
 use super::project::{Projected, Rect};
 use super::tiles::{runs, Bins, Span};
-use super::{ALPHA_MAX, ALPHA_MIN, TILE, TRANSMITTANCE_MIN};
+use super::TILE;
+use crate::contract::{ALPHA_MAX, ALPHA_MIN, TRANSMITTANCE_MIN};
 use crate::model::Blend;
 use std::ops::Range;
 
@@ -20,32 +21,103 @@ const TILE_BUDGET: u64 = 1 << 20;
 /// Tile area in pixels.
 const TILE_PIXELS: usize = (TILE * TILE) as usize;
 
-/// Render projected Gaussians (in stored order) into `out`, `width * height * 3` floats.
-pub(crate) fn render_projected(
+/// What the renderer writes a band of pixels into. Blending happens in `f32` RGB; an
+/// output of another layout gets each band converted from a per-thread scratch band, so
+/// that a whole-image `f32` copy is never made.
+pub(crate) trait Output: Sync {
+    type Elem: Copy + Send + Sync;
+    /// Elements per pixel.
+    const PER_PIXEL: usize;
+    /// Have `draw` blend a band into `f32` RGB (zeroed by `draw`), stored into `out`.
+    fn band(out: &mut [Self::Elem], scratch: &mut Vec<f32>, draw: impl FnOnce(&mut [f32]));
+}
+
+/// `f32` RGB, blended in place.
+pub(crate) struct RgbF32;
+/// 8-bit RGB by [`super::to_u8`].
+pub(crate) struct Rgb8;
+/// 8-bit RGBA by [`super::to_u8`], alpha 255.
+pub(crate) struct Rgba8;
+/// `f32` RGB as native-endian bytes (12 per pixel), for byte buffers such as `image`'s.
+pub(crate) struct RgbF32Bytes;
+
+impl Output for RgbF32 {
+    type Elem = f32;
+    const PER_PIXEL: usize = 3;
+    fn band(out: &mut [f32], _: &mut Vec<f32>, draw: impl FnOnce(&mut [f32])) {
+        draw(out)
+    }
+}
+
+/// Blend a band of `pixels` pixels into `scratch` and hand it to `store`.
+fn via_scratch(scratch: &mut Vec<f32>, pixels: usize, draw: impl FnOnce(&mut [f32])) -> &[f32] {
+    scratch.clear();
+    scratch.resize(pixels * 3, 0.0);
+    draw(scratch);
+    scratch
+}
+
+impl Output for Rgb8 {
+    type Elem = u8;
+    const PER_PIXEL: usize = 3;
+    fn band(out: &mut [u8], scratch: &mut Vec<f32>, draw: impl FnOnce(&mut [f32])) {
+        let rgb = via_scratch(scratch, out.len() / 3, draw);
+        for (o, &c) in out.iter_mut().zip(rgb) {
+            *o = super::to_u8(c);
+        }
+    }
+}
+
+impl Output for Rgba8 {
+    type Elem = u8;
+    const PER_PIXEL: usize = 4;
+    fn band(out: &mut [u8], scratch: &mut Vec<f32>, draw: impl FnOnce(&mut [f32])) {
+        let rgb = via_scratch(scratch, out.len() / 4, draw);
+        for (o, c) in out.chunks_exact_mut(4).zip(rgb.chunks_exact(3)) {
+            o[..3].copy_from_slice(&[super::to_u8(c[0]), super::to_u8(c[1]), super::to_u8(c[2])]);
+            o[3] = 255;
+        }
+    }
+}
+
+impl Output for RgbF32Bytes {
+    type Elem = u8;
+    const PER_PIXEL: usize = 12;
+    fn band(out: &mut [u8], scratch: &mut Vec<f32>, draw: impl FnOnce(&mut [f32])) {
+        let rgb = via_scratch(scratch, out.len() / 12, draw);
+        for (o, c) in out.chunks_exact_mut(4).zip(rgb) {
+            o.copy_from_slice(&c.to_ne_bytes());
+        }
+    }
+}
+
+/// Render projected Gaussians (in stored order) into `out`, `width * height` pixels of
+/// `O`'s layout.
+pub(crate) fn render_projected<O: Output>(
     proj: &[Projected],
     blend: Blend,
     width: u32,
     height: u32,
-    out: &mut [f32],
+    out: &mut [O::Elem],
     parallel: bool,
 ) {
     let budgets = (BAND_BUDGET, TILE_BUDGET);
-    render_budgeted(proj, blend, width, height, out, parallel, budgets);
+    render_budgeted::<O>(proj, blend, width, height, out, parallel, budgets);
 }
 
 /// [`render_projected`] with explicit binning budgets `(bands, tiles)`, so that tests can
 /// force many small runs.
-fn render_budgeted(
+fn render_budgeted<O: Output>(
     proj: &[Projected],
     blend: Blend,
     width: u32,
     height: u32,
-    out: &mut [f32],
+    out: &mut [O::Elem],
     parallel: bool,
     (band_budget, tile_budget): (u64, u64),
 ) {
-    debug_assert_eq!(out.len(), width as usize * height as usize * 3);
-    let row_len = width as usize * 3;
+    debug_assert_eq!(out.len(), width as usize * height as usize * O::PER_PIXEL);
+    let row_len = width as usize * O::PER_PIXEL;
     let band_len = TILE.min(height) as usize * row_len;
     let band_count = height.div_ceil(TILE);
     let spans = proj
@@ -60,7 +132,7 @@ fn render_budgeted(
         let start = run.start as usize * band_len;
         let end = (run.end as usize * band_len).min(out.len());
         let rows = &mut out[start..end];
-        let job = |scratch: &mut Scratch, (k, rows): (usize, &mut [f32])| {
+        let job = |scratch: &mut Scratch, (k, rows): (usize, &mut [O::Elem])| {
             let band = run.start + k as u32;
             let ctx = Band {
                 proj,
@@ -70,7 +142,8 @@ fn render_budgeted(
                 y0: band * TILE,
                 tile_budget,
             };
-            ctx.render(bands.slot(band), rows, scratch);
+            let Scratch { tiles, band: rgb } = scratch;
+            O::band(rows, rgb, |px| ctx.render(bands.slot(band), px, tiles));
         };
         #[cfg(feature = "parallel")]
         if parallel {
@@ -92,6 +165,8 @@ fn render_budgeted(
 #[derive(Default)]
 struct Scratch {
     tiles: Bins,
+    /// One band in `f32` RGB, for outputs not blended in place.
+    band: Vec<f32>,
 }
 
 /// What every tile of one band needs to know.
@@ -109,7 +184,7 @@ struct Band<'a> {
 impl Band<'_> {
     /// Render the Gaussians of `list` (indices into `proj`, stored order) into `rows`,
     /// the band's pixel rows.
-    fn render(&self, list: &[u32], rows: &mut [f32], scratch: &mut Scratch) {
+    fn render(&self, list: &[u32], rows: &mut [f32], tiles: &mut Bins) {
         rows.fill(0.0);
         if list.is_empty() {
             return;
@@ -122,9 +197,9 @@ impl Band<'_> {
             (k, b.x0 / TILE, b.x1 / TILE)
         });
         for run in runs(spans.clone(), tiles_x, self.tile_budget) {
-            scratch.tiles.fill(spans.clone(), run.clone());
+            tiles.fill(spans.clone(), run.clone());
             for tx in run {
-                let tile = scratch.tiles.slot(tx);
+                let tile = tiles.slot(tx);
                 if tile.is_empty() {
                     continue;
                 }
@@ -273,8 +348,8 @@ mod tests {
         let proj = project_scene(&scene, w, h);
         let mut seq = vec![f32::NAN; (w * h * 3) as usize];
         let mut par = vec![f32::NAN; (w * h * 3) as usize];
-        render_projected(&proj, blend, w, h, &mut seq, false);
-        render_projected(&proj, blend, w, h, &mut par, true);
+        render_projected::<RgbF32>(&proj, blend, w, h, &mut seq, false);
+        render_projected::<RgbF32>(&proj, blend, w, h, &mut par, true);
         (seq, par)
     }
 
@@ -304,7 +379,7 @@ mod tests {
             let proj = project_scene(&scene, w, h);
             let mut a = vec![0.0; (w * h * 3) as usize];
             let mut b = a.clone();
-            render_budgeted(
+            render_budgeted::<RgbF32>(
                 &proj,
                 blend,
                 w,
@@ -313,7 +388,7 @@ mod tests {
                 false,
                 (BAND_BUDGET, TILE_BUDGET),
             );
-            render_budgeted(&proj, blend, w, h, &mut b, false, (0, 0));
+            render_budgeted::<RgbF32>(&proj, blend, w, h, &mut b, false, (0, 0));
             assert!(a.iter().any(|&x| x != 0.0));
             assert!(
                 a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits()),

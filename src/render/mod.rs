@@ -23,6 +23,8 @@ mod tiles;
 #[cfg(feature = "encode")]
 pub(crate) use project::Rect;
 pub use project::{project, project_scene, PixelBox, Projected};
+#[cfg(any(feature = "encode", feature = "gpu"))]
+pub(crate) use tiles::TileLists;
 
 /// Render already-projected Gaussians into `out` (`width·height·3` floats, overwritten):
 /// the differentiable rasterizer shares this path so that fitting sees decoded pixels.
@@ -34,32 +36,13 @@ pub(crate) fn render_projected(
     height: u32,
     out: &mut [f32],
 ) {
-    cpu::render_projected(proj, blend, width, height, out, cfg!(feature = "parallel"));
+    let parallel = cfg!(feature = "parallel");
+    cpu::render_projected::<cpu::RgbF32>(proj, blend, width, height, out, parallel);
 }
 
 use crate::format::{Error, ErrorKind, Limits, Result};
 use crate::model::{self, Scene};
 
-/// Floor of a pixel-space variance (px²). Keeps a Gaussian far below a pixel from
-/// having an infinite conic, and its determinant a normal float.
-pub const VAR_MIN: f32 = 1e-4;
-/// Ceiling of a pixel-space variance (px²); with [`VAR_MIN`] it keeps `a·c` finite.
-pub const VAR_MAX: f32 = 1e12;
-/// The covariance term is clamped to this fraction of `√(a·c)`, so the determinant stays
-/// positive however the parameters were rounded.
-pub const CORRELATION_MAX: f32 = 0.999;
-/// Half-extent of a Gaussian's pixel box, in standard deviations along x and y.
-pub const EXTENT_SIGMAS: f32 = 3.0;
-/// Contributions with `alpha` below this are skipped (they are invisible in 8 bits).
-pub const ALPHA_MIN: f32 = 1.0 / 255.0;
-/// In `alpha` blending one Gaussian lets at least 1 % of the light through.
-pub const ALPHA_MAX: f32 = 0.99;
-/// In `alpha` blending a pixel stops once its transmittance falls below this.
-pub const TRANSMITTANCE_MIN: f32 = 1e-4;
-/// Colours are clamped to `±COLOR_MAX` before blending. A `sum` of fewer than 2^32
-/// Gaussians with alpha ≤ 1 then stays below 2^38, so no file can make a pixel infinite; displayable
-/// colours are in `[0, 1]` and fitted ones stay within a few units.
-pub const COLOR_MAX: f32 = 64.0;
 /// Side of a square tile, in pixels.
 pub const TILE: u32 = 16;
 
@@ -96,22 +79,25 @@ impl RgbImage {
 
 /// `floor(clamp(c, 0, 1) · 255 + 0.5)`; the float-to-int cast maps NaN to 0.
 #[inline]
-fn to_u8(c: f32) -> u8 {
+pub(crate) fn to_u8(c: f32) -> u8 {
     (c.clamp(0.0, 1.0) * 255.0 + 0.5).floor() as u8
 }
 
 /// Render `scene` at `width × height` on the CPU.
 ///
 /// Any output size is allowed: geometry is normalized, so another size samples the same
-/// continuous image at other pixel centres. The only refusal is an empty size
-/// ([`ErrorKind::InvalidValue`]) or one whose buffer cannot be addressed
-/// ([`ErrorKind::LimitExceeded`]); a caller rendering untrusted files checks
-/// [`Limits::check_output`] first, since this function allocates `width·height·12` bytes.
+/// continuous image at other pixel centres. Refused: an empty size
+/// ([`ErrorKind::InvalidValue`]), or one over the default [`Limits`]' `max_output_pixels`
+/// or `max_alloc` for the `width·height·12` bytes this allocates
+/// ([`ErrorKind::LimitExceeded`]) — the bounds the GPU renderer applies too. To render
+/// with other limits, or into 8 bits without the `f32` image, use [`crate::Reader`] or
+/// the `render_*_into` functions with a buffer of your own.
 ///
 /// With the `parallel` feature, tile rows are spread over rayon's pool; the result is
 /// bit-identical to the sequential build.
 pub fn render(scene: &Scene, width: u32, height: u32) -> Result<RgbImage> {
-    let len = buffer_len(width, height)?;
+    let len = buffer_len(width, height, 3, &Limits::default())?;
+    Limits::default().check_alloc(len as u64 * 4, "the rendered image")?;
     let mut data = vec![0.0; len];
     render_into(scene, width, height, &mut data)?;
     Ok(RgbImage {
@@ -124,12 +110,40 @@ pub fn render(scene: &Scene, width: u32, height: u32) -> Result<RgbImage> {
 /// Render into a caller-provided buffer of exactly `width * height * 3` floats
 /// (overwritten, not accumulated into), so that repeated renders reuse one allocation.
 pub fn render_into(scene: &Scene, width: u32, height: u32, out: &mut [f32]) -> Result<()> {
-    let len = buffer_len(width, height)?;
+    render_as::<cpu::RgbF32>(scene, width, height, out)
+}
+
+/// Render into a caller's buffer of exactly `width * height * 3` bytes of 8-bit RGB, the
+/// values [`RgbImage::to_rgb8`] gives. Tiles are blended in a band-sized scratch buffer
+/// and written straight into `out`: no whole-image `f32` copy is made.
+pub fn render_rgb8_into(scene: &Scene, width: u32, height: u32, out: &mut [u8]) -> Result<()> {
+    render_as::<cpu::Rgb8>(scene, width, height, out)
+}
+
+/// As [`render_rgb8_into`], in 8-bit RGBA (`width * height * 4` bytes, alpha 255).
+pub fn render_rgba8_into(scene: &Scene, width: u32, height: u32, out: &mut [u8]) -> Result<()> {
+    render_as::<cpu::Rgba8>(scene, width, height, out)
+}
+
+/// As [`render_into`], with the floats written as native-endian bytes
+/// (`width * height * 12`), for byte-typed buffers.
+pub fn render_f32_bytes_into(scene: &Scene, width: u32, height: u32, out: &mut [u8]) -> Result<()> {
+    render_as::<cpu::RgbF32Bytes>(scene, width, height, out)
+}
+
+/// Check `scene` and `out`, project, and render in `O`'s layout.
+fn render_as<O: cpu::Output>(
+    scene: &Scene,
+    width: u32,
+    height: u32,
+    out: &mut [O::Elem],
+) -> Result<()> {
+    let len = buffer_len(width, height, O::PER_PIXEL, &Limits::unlimited())?;
     if out.len() != len {
         return Err(Error::new(
             ErrorKind::InvalidValue,
             format!(
-                "output buffer holds {} floats, {width}x{height} RGB needs {len}",
+                "output buffer holds {} values, {width}x{height} needs {len}",
                 out.len()
             ),
         ));
@@ -148,23 +162,18 @@ pub fn render_into(scene: &Scene, width: u32, height: u32, out: &mut [f32]) -> R
         ));
     }
     let projected = project_scene(scene, width, height);
-    cpu::render_projected(
-        &projected,
-        scene.blend,
-        width,
-        height,
-        out,
-        cfg!(feature = "parallel"),
-    );
+    let parallel = cfg!(feature = "parallel");
+    cpu::render_projected::<O>(&projected, scene.blend, width, height, out, parallel);
     Ok(())
 }
 
-/// Number of floats of a `width × height` RGB buffer, refusing empty or unaddressable sizes.
-fn buffer_len(width: u32, height: u32) -> Result<usize> {
-    Limits::unlimited().check_output(width, height)?;
+/// Number of values of a `width × height` buffer of `per_pixel` values, refusing empty
+/// sizes, sizes over `limits` and unaddressable ones.
+fn buffer_len(width: u32, height: u32, per_pixel: usize, limits: &Limits) -> Result<usize> {
+    limits.check_output(width, height)?;
     usize::try_from(u64::from(width) * u64::from(height))
         .ok()
-        .and_then(|px| px.checked_mul(3))
+        .and_then(|px| px.checked_mul(per_pixel))
         .ok_or_else(|| {
             Error::new(
                 ErrorKind::LimitExceeded,
@@ -197,14 +206,24 @@ mod tests {
 
     #[test]
     fn buffer_len_refuses_empty_sizes() {
+        let any = Limits::unlimited();
         assert_eq!(
-            buffer_len(0, 5).unwrap_err().kind(),
+            buffer_len(0, 5, 3, &any).unwrap_err().kind(),
             ErrorKind::InvalidValue
         );
         assert_eq!(
-            buffer_len(5, 0).unwrap_err().kind(),
+            buffer_len(5, 0, 3, &any).unwrap_err().kind(),
             ErrorKind::InvalidValue
         );
-        assert_eq!(buffer_len(2, 3).unwrap(), 18);
+        assert_eq!(buffer_len(2, 3, 3, &any).unwrap(), 18);
+        assert_eq!(buffer_len(2, 3, 4, &any).unwrap(), 24);
+        let small = Limits {
+            max_output_pixels: 5,
+            ..Limits::default()
+        };
+        assert_eq!(
+            buffer_len(2, 3, 3, &small).unwrap_err().kind(),
+            ErrorKind::LimitExceeded
+        );
     }
 }

@@ -3,7 +3,9 @@
 //! Every renderer starts here, so that the clamps, the conic and the pixel box, which
 //! decide which pixels a Gaussian may touch, are computed once and the same way.
 
-use super::{ALPHA_MAX, ALPHA_MIN, COLOR_MAX, CORRELATION_MAX, EXTENT_SIGMAS, VAR_MAX, VAR_MIN};
+use crate::contract::{
+    ALPHA_MAX, ALPHA_MIN, COLOR_MAX, CORRELATION_MAX, EXTENT_SIGMAS, VAR_MAX, VAR_MIN,
+};
 use crate::model::{Blend, Scene};
 
 /// Inclusive range of pixel columns `x0..=x1` and rows `y0..=y1`; never empty.

@@ -3,11 +3,20 @@
 
 use std::path::{Path, PathBuf};
 
+/// The repository's root: the library's folder, also for the tests of `cli/` that
+/// include this file.
+pub fn repo_root() -> PathBuf {
+    let here = Path::new(env!("CARGO_MANIFEST_DIR"));
+    if here.join("format-spec.md").exists() {
+        here.to_path_buf()
+    } else {
+        here.join("..")
+    }
+}
+
 /// The `.gsi` files of `corpus/<sub>`, sorted.
 pub fn corpus(sub: &str) -> Vec<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("corpus")
-        .join(sub);
+    let dir = repo_root().join("corpus").join(sub);
     let mut v: Vec<_> = std::fs::read_dir(dir)
         .unwrap()
         .map(|e| e.unwrap().path())

@@ -21,7 +21,7 @@ pub fn run(args: Args) -> Result<(), Failure> {
     } else {
         to_text(&f)
     };
-    println!("{out}");
+    crate::io::print_line(&out)?;
     Ok(())
 }
 

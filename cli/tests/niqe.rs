@@ -4,6 +4,7 @@
 
 use gsi::metrics::{self, MetricError, Rgb8, NIQE_PATCH};
 
+#[path = "../../tests/common/mod.rs"]
 mod common;
 
 use common::Lcg;
@@ -86,7 +87,6 @@ fn partial_patches_are_cropped() {
     );
 }
 
-#[cfg(feature = "cli")]
 mod on_shared_data {
     use super::*;
     use std::path::{Path, PathBuf};
@@ -158,7 +158,7 @@ mod on_shared_data {
     const SAME_ARITHMETIC: f64 = 1e-9;
 
     fn data_dir() -> Option<PathBuf> {
-        let d = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data");
+        let d = common::repo_root().join("../shared/data");
         if d.join("LOL/eval15/low").is_dir() && d.join("kodak").is_dir() {
             Some(d)
         } else {

@@ -1,8 +1,8 @@
 //! The wgpu renderer against the CPU renderer. Runs wherever wgpu finds an adapter (CI:
 //! lavapipe from `mesa-vulkan-drivers`); with `GSI_REQUIRE_GPU=1` a missing adapter is a
 //! failure rather than a skip, so CI cannot pass without running these.
-#![cfg(feature = "gpu")]
 
+#[path = "../../tests/common/mod.rs"]
 mod common;
 
 use gsi::format::{read_file, Limits};
@@ -144,7 +144,6 @@ fn empty_and_tiny_scenes() {
     assert!(gpu.render(&one, 0, 5).is_err());
 }
 
-#[cfg(feature = "cli")]
 #[test]
 fn cli_decode_on_the_gpu_and_a_missing_adapter() {
     let Some(_) = gpu() else { return };
@@ -202,7 +201,6 @@ fn cli_decode_on_the_gpu_and_a_missing_adapter() {
 /// The backward pass on the GPU against `fit::raster::backward`, both blend modes and an
 /// edge-cut size: relative error of each kind of gradient (mean, conic, opacity, colour)
 /// at most 1e-3.
-#[cfg(feature = "encode")]
 #[test]
 fn gradients_match_the_cpu() {
     for blend in [Blend::Sum, Blend::Alpha] {
@@ -212,7 +210,6 @@ fn gradients_match_the_cpu() {
     }
 }
 
-#[cfg(feature = "encode")]
 fn gradients_match(blend: Blend, w: u32, h: u32) {
     use gsi::fit::raster::{backward, forward, Need};
     let Some(gpu) = gpu() else { return };
@@ -259,10 +256,10 @@ fn gradients_match(blend: Blend, w: u32, h: u32) {
 
 /// A fit whose steps run on the GPU decodes (on the CPU) at the quality of the same fit on
 /// the CPU: within 0.5 dB, both blend modes.
-#[cfg(feature = "encode")]
 #[test]
 fn a_gpu_fit_matches_a_cpu_fit() {
-    use gsi::fit::{encode, encode_on_gpu, Budget, EncodeOptions};
+    use gsi::fit::{encode, Budget, EncodeOptions};
+    use gsi::Device;
     let Some(gpu) = gpu() else { return };
     // A target with detail at several scales: the render of random Gaussians.
     let source = random_scene(21, SceneSpec::new(96, 64, 600, Blend::Sum));
@@ -275,8 +272,8 @@ fn a_gpu_fit_matches_a_cpu_fit() {
             blend,
             ..EncodeOptions::default()
         };
-        let cpu = encode(&target, &opts, &mut |_| {}).unwrap();
-        let on_gpu = encode_on_gpu(&target, &opts, &gpu, &mut |_| {}).unwrap();
+        let cpu = encode(&target, &opts, gsi::Device::Cpu, &mut |_| {}).unwrap();
+        let on_gpu = encode(&target, &opts, Device::Gpu(&gpu), &mut |_| {}).unwrap();
         eprintln!(
             "{blend:?}: CPU fit {:.2} dB, GPU fit {:.2} dB",
             cpu.psnr, on_gpu.psnr
@@ -298,7 +295,6 @@ fn a_gpu_fit_matches_a_cpu_fit() {
 /// The fitting loop resident on the GPU takes the CPU's steps: from the same start, the
 /// same losses, PSNRs and parameters after several Adam steps (quantization-aware ones
 /// included), both blend modes.
-#[cfg(feature = "encode")]
 #[test]
 fn resident_steps_follow_the_cpu_steps() {
     use gsi::fit::{default_bits, Fitter, Init, LearningRates, Loss};
@@ -426,7 +422,6 @@ fn a_resident_scene_survives_degenerate_gaussians() {
 
 /// `gsi enhance --device gpu` (the mixture on the GPU) writes a file that decodes as the
 /// CPU's does; with no such adapter it fails and leaves the file as it was.
-#[cfg(feature = "cli")]
 #[test]
 fn cli_enhance_on_the_gpu() {
     use gsi::format::{to_bytes, BitDepths, Records, WriteOptions};

@@ -19,14 +19,9 @@
 //! (the logit gradient is `b·(w·(g − s))` here, `(b·w)·(g − s)` there): a relative 2e-7
 //! after one iteration (`enhance::fit` tests).
 
-use super::{too_big, Gpu, Kernel};
-use crate::enhance::mixture::{MapTap, GAIN_LOG_MAX};
+use super::mixture::{MapTap, GAIN_LOG_MAX};
 use crate::format::{Error, ErrorKind, Result};
-
-/// u32 words per Gaussian in the `gauss` buffer (`GAUSS` of the shaders' prelude).
-pub(crate) const GAUSS: usize = 12;
-/// Largest K and hidden width the shaders' private arrays hold (`WIDTH_MAX`).
-pub(crate) const WIDTH_MAX: usize = 64;
+use crate::gpu::{shader, too_big, Gpu, Kernel, GAUSS, WIDTH_MAX};
 
 /// The pipelines, built the first time an enhancement runs on a device.
 pub(crate) struct EnhanceKernels {
@@ -39,7 +34,7 @@ pub(crate) struct EnhanceKernels {
 }
 
 impl EnhanceKernels {
-    pub(crate) fn new(device: &wgpu::Device) -> EnhanceKernels {
+    fn new(device: &wgpu::Device) -> EnhanceKernels {
         let [weights, operators, mixed] = Kernel::entries(
             device,
             "enhance_forward",
@@ -153,7 +148,7 @@ impl<'g> GpuMixture<'g> {
                 ));
             }
             let ops = experts - 1;
-            let per = crate::enhance::mixture::Enhancer::params_per_operator(hidden);
+            let per = super::mixture::Enhancer::params_per_operator(hidden);
             let params_len = ops * per;
             let chunks = count.div_ceil(chunk);
             // Trace: K weights, then 2h pre-activations and 3 outputs per operator.
@@ -196,7 +191,7 @@ impl<'g> GpuMixture<'g> {
                 }
             }
             let device = &gpu.device;
-            let k = gpu.enhance_kernels();
+            let k = gpu.kernels(EnhanceKernels::new);
             let mix = gpu.uniform_buffer(bytemuck::bytes_of(&uniform));
             let gauss = gpu.storage(bytemuck::cast_slice(&gauss));
             let params = gpu.zeroed(params_len as u64 * 4);
@@ -257,7 +252,7 @@ impl<'g> GpuMixture<'g> {
                 gpu.queue
                     .write_buffer(&self.params, 0, bytemuck::cast_slice(params));
             }
-            let k = gpu.enhance_kernels();
+            let k = gpu.kernels(EnhanceKernels::new);
             let mut enc = gpu.encoder();
             gpu.pass(
                 &mut enc,
@@ -304,7 +299,7 @@ impl<'g> GpuMixture<'g> {
             let gpu = self.gpu;
             gpu.queue
                 .write_buffer(&self.g_col, 0, bytemuck::cast_slice(g_col));
-            let k = gpu.enhance_kernels();
+            let k = gpu.kernels(EnhanceKernels::new);
             let mut enc = gpu.encoder();
             // `enhance_params` returns at once when there are no operators.
             gpu.pass(

@@ -39,7 +39,7 @@ struct Args {
 }
 
 fn parse_args() -> Args {
-    let shared = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data");
+    let shared = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/..")).join("../shared/data");
     let mut a = Args {
         kodak: Some(shared.join("kodak")),
         lol: Some(shared.join("LOL/eval15/high")),
@@ -158,7 +158,7 @@ fn commit() -> String {
     let git = |args: &[&str]| {
         std::process::Command::new("git")
             .args(args)
-            .current_dir(env!("CARGO_MANIFEST_DIR"))
+            .current_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
             .output()
             .ok()
             .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_owned())
@@ -238,7 +238,7 @@ fn main() {
                     ..EncodeOptions::default()
                 };
                 let t0 = Instant::now();
-                let e = encode(&target, &opts, &mut |_| {}).expect("encode");
+                let e = encode(&target, &opts, gsi::Device::Cpu, &mut |_| {}).expect("encode");
                 let seconds = t0.elapsed().as_secs_f64();
                 let decoded = gsi::render::render(&e.records.to_scene(), w, h)
                     .expect("render")
@@ -310,7 +310,7 @@ fn init_curves(path: &Path, args: &Args) -> Curves {
             ..EncodeOptions::default()
         };
         let mut curve = Vec::new();
-        let e = encode(&target, &opts, &mut |p| curve.push(*p)).expect("encode");
+        let e = encode(&target, &opts, gsi::Device::Cpu, &mut |p| curve.push(*p)).expect("encode");
         (curve, e.psnr)
     };
     let (random, random_psnr) = run(Init::Random, args.curve_iterations);
@@ -587,7 +587,7 @@ fn plot_curves(cv: &Curves, path: &Path) {
 /// Rewrite the part of BENCHMARKS.md between `<!-- report:NAME:start -->` and
 /// `<!-- report:NAME:end -->` (appended when the markers are missing).
 fn replace_section(name: &str, body: &str) {
-    let bench = Path::new(env!("CARGO_MANIFEST_DIR")).join("BENCHMARKS.md");
+    let bench = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/..")).join("BENCHMARKS.md");
     let old = std::fs::read_to_string(&bench).unwrap_or_default();
     let (start, end) = (
         format!("<!-- report:{name}:start -->"),

@@ -58,22 +58,31 @@ pub fn run(args: Args) -> Result<(), Failure> {
     // Refuse an unsupported output format before any rendering (or GPU start-up).
     let format = format_of(&args.output)?;
     let scene = f.records.to_scene();
-    let image = match device::open(args.device, "decoding", false)? {
-        None => gsi::render::render(&scene, w, ht)?,
+    // On the CPU, tiles are blended a band at a time straight into the 8-bit output: 3
+    // bytes per pixel in memory, not a float image and then an 8-bit copy.
+    let cpu = |scene: &gsi::Scene| -> Result<Vec<u8>, Failure> {
+        let len = w as usize * ht as usize * 3;
+        Limits::default().check_alloc(len as u64, "the decoded image")?;
+        let mut rgb = vec![0u8; len];
+        gsi::render::render_rgb8_into(scene, w, ht, &mut rgb)?;
+        Ok(rgb)
+    };
+    let rgb = match device::open(args.device, "decoding", false)? {
+        None => cpu(&scene)?,
         Some(gpu) => match gpu.render(&scene, w, ht) {
-            Ok(image) => image,
+            Ok(image) => image.to_rgb8(),
             // Too large for this adapter's buffers: `auto` falls back, `gpu` fails.
             Err(e)
                 if e.kind() == gsi::format::ErrorKind::LimitExceeded
                     && args.device == DeviceArg::Auto =>
             {
                 eprintln!("gsi: {e}; decoding on the CPU");
-                gsi::render::render(&scene, w, ht)?
+                cpu(&scene)?
             }
             Err(e) => return Err(e.into()),
         },
     };
-    let bytes = encode_image(&image.to_rgb8(), w, ht, format)?;
+    let bytes = encode_image(&rgb, w, ht, format)?;
     io::write_output(&args.output, &bytes)
         .map_err(|e| Failure(format!("{}: {e}", args.output.display())))
 }

@@ -25,114 +25,34 @@
 //! Pruning, re-placement and colour solves stay on the CPU ([`crate::fit::Fitter`]): the
 //! fitter downloads the state before them and uploads it after, a few times per fit.
 
-use super::forward::{capacity_for, flatten, Forward, ForwardLists};
-use super::sort::RadixSort;
-use super::{too_big, Gpu, Kernel};
-use crate::fit::LearningRates;
 use crate::format::{BitDepths, Error, ErrorKind, Limits, Result, MAX_BITS};
+use crate::gpu::forward::{capacity_for, flatten, FitUniform, Forward, ForwardLists, STRIDE};
+use crate::gpu::{shader, too_big, Gpu, Kernel, SLOT};
 use crate::model::{Blend, GaussianSet};
-use crate::render::{RgbImage, TILE};
+use crate::optim::{Adam, AdamRule, LearningRates};
+use crate::render::RgbImage;
 
-/// Floats per Gaussian in the parameter and moment buffers (`STRIDE` of
-/// `fit_common.wgsl`): u, v, ln σ1, ln σ2, θ, r, g, b, opacity.
-pub(crate) const STRIDE: usize = 9;
-/// Invocations per workgroup of the one-dimensional kernels (`GROUP`).
-pub(crate) const GROUP: u32 = 256;
-
-/// The pipelines of the loop, built the first time a fit runs on a device.
-pub(crate) struct FitKernels {
-    pub range: Kernel,
-    pub project: Kernel,
-    pub scan: Kernel,
-    pub emit: Kernel,
-    pub tiles: Kernel,
-    pub sort: RadixSort,
+/// The kernels only the optimizer step needs (the forward half is
+/// [`crate::gpu::forward`]'s), built the first time a fit runs on a device.
+pub(crate) struct StepKernels {
     loss: Kernel,
     adam: Kernel,
 }
 
-impl FitKernels {
-    pub(crate) fn new(device: &wgpu::Device) -> FitKernels {
+impl StepKernels {
+    fn new(device: &wgpu::Device) -> StepKernels {
         let k = |label, source: String, reads, writes| {
             Kernel::new(device, label, &source, reads, writes)
         };
-        FitKernels {
-            range: k("fit_range", shader!("fit_common", "fit_range"), 1, 1),
-            project: k("fit_project", shader!("fit_common", "fit_project"), 2, 3),
-            scan: k("fit_scan", shader!("fit_common", "fit_scan"), 1, 2),
-            emit: k("fit_emit", shader!("fit_common", "fit_emit"), 2, 2),
-            tiles: k("fit_tiles", shader!("fit_common", "fit_tiles"), 2, 1),
+        StepKernels {
             loss: k("fit_loss", shader!("fit_common", "fit_loss"), 2, 3),
             adam: k("fit_adam", shader!("fit_common", "fit_adam"), 6, 2),
-            sort: RadixSort::new(device),
         }
     }
-}
 
-/// The uniform block `Fit` of `fit_common.wgsl`.
-#[repr(C)]
-#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
-pub(crate) struct FitUniform {
-    pub width: u32,
-    pub height: u32,
-    pub tiles_x: u32,
-    pub tiles_y: u32,
-    pub count: u32,
-    pub capacity: u32,
-    pub blend: u32,
-    has_opacity: u32,
-    qat: u32,
-    bits: [u32; 4],
-    lr: [f32; 5],
-    c1: f32,
-    c2: f32,
-    beta1: f32,
-    beta2: f32,
-    eps: f32,
-    pub cholesky: u32,
-}
-
-impl FitUniform {
-    /// `count` Gaussians drawn at `width × height`; no step taken yet.
-    pub(crate) fn new(
-        width: u32,
-        height: u32,
-        count: usize,
-        blend: Blend,
-        has_opacity: bool,
-    ) -> FitUniform {
-        FitUniform {
-            width,
-            height,
-            tiles_x: width.div_ceil(TILE),
-            tiles_y: height.div_ceil(TILE),
-            count: count as u32,
-            capacity: 0,
-            blend: u32::from(blend == Blend::Alpha),
-            has_opacity: u32::from(has_opacity),
-            qat: 0,
-            bits: [0; 4],
-            lr: [0.0; 5],
-            c1: 1.0,
-            c2: 1.0,
-            beta1: 0.0,
-            beta2: 0.0,
-            eps: 0.0,
-            cholesky: 0,
-        }
+    fn of(gpu: &Gpu) -> std::sync::Arc<StepKernels> {
+        gpu.kernels(StepKernels::new)
     }
-}
-
-/// Adam's state as the CPU fitter keeps it ([`crate::fit::params::Adam`]).
-pub struct AdamState {
-    /// Steps taken so far.
-    pub step: i32,
-    pub beta1: f32,
-    pub beta2: f32,
-    pub eps: f32,
-    /// First and second moments, shaped like the parameters.
-    pub m: GaussianSet,
-    pub v: GaussianSet,
 }
 
 /// What a step measured, when asked.
@@ -187,7 +107,7 @@ impl<'g> ResidentFit<'g> {
         target: &RgbImage,
         blend: Blend,
         params: &GaussianSet,
-        adam: &AdamState,
+        adam: &Adam,
     ) -> Result<ResidentFit<'g>> {
         gpu.checked(|| {
             let (w, h) = (target.width, target.height);
@@ -259,8 +179,7 @@ impl<'g> ResidentFit<'g> {
             self.adam_step += 1;
             let u = &mut self.uniform;
             u.capacity = self.lists.forward.capacity;
-            u.c1 = 1.0 - u.beta1.powi(self.adam_step);
-            u.c2 = 1.0 - u.beta2.powi(self.adam_step);
+            (u.c1, u.c2) = AdamRule::at(u.beta1, u.beta2, u.eps, self.adam_step).corrections();
             u.lr = [lr.position, lr.log_scale, lr.rotation, lr.color, lr.opacity];
             u.qat = u32::from(qat.is_some());
             if let Some(b) = qat {
@@ -269,7 +188,7 @@ impl<'g> ResidentFit<'g> {
             }
             gpu.queue
                 .write_buffer(&self.forward.fit, 0, bytemuck::bytes_of(&self.uniform));
-            let k = gpu.fit_kernels();
+            let k = StepKernels::of(gpu);
             let (f, b, l) = (&self.forward, &self.back, &self.lists);
             let mut enc = gpu.encoder();
             f.record_binning(gpu, &l.forward, &mut enc, qat.is_some());
@@ -324,7 +243,7 @@ impl<'g> ResidentFit<'g> {
 
     /// The parameters and Adam's state as they are now, shaped as the CPU fitter keeps
     /// them.
-    pub fn download(&self) -> Result<(GaussianSet, AdamState)> {
+    pub fn download(&self) -> Result<(GaussianSet, Adam)> {
         self.gpu.checked(|| {
             let enc = self.gpu.encoder();
             let [params, moments] = self
@@ -336,7 +255,7 @@ impl<'g> ResidentFit<'g> {
             let o = self.has_opacity;
             Ok((
                 unflatten(&params[..n], o),
-                AdamState {
+                Adam {
                     step: self.adam_step,
                     beta1: self.uniform.beta1,
                     beta2: self.uniform.beta2,
@@ -355,7 +274,7 @@ impl Backward {
         f: &Forward,
         uniform: &FitUniform,
         target: &RgbImage,
-        adam: &AdamState,
+        adam: &Adam,
     ) -> Result<Backward> {
         let device = &gpu.device;
         let pixels = u64::from(uniform.width) * u64::from(uniform.height);
@@ -375,7 +294,7 @@ impl Backward {
             0u32,
         ]));
         Ok(Backward {
-            loss: gpu.fit_kernels().loss.bind(
+            loss: StepKernels::of(gpu).loss.bind(
                 device,
                 &[&f.fit, &f.image, &target, &dl, &loss_part, &sse8_part],
             ),
@@ -391,9 +310,9 @@ impl Backward {
 
 impl Lists {
     fn new(gpu: &Gpu, f: &Forward, b: &Backward, blend: Blend, capacity: u32) -> Result<Lists> {
-        let forward = ForwardLists::new(gpu, f, capacity, super::SLOT as u64 * 4)?;
+        let forward = ForwardLists::new(gpu, f, capacity, SLOT as u64 * 4)?;
         let device = &gpu.device;
-        let slots = gpu.zeroed(u64::from(capacity) * super::SLOT as u64 * 4);
+        let slots = gpu.zeroed(u64::from(capacity) * SLOT as u64 * 4);
         let values = &forward.values;
         Ok(Lists {
             backward: gpu.backward_kernel(blend).bind(
@@ -408,7 +327,7 @@ impl Lists {
                     &slots,
                 ],
             ),
-            adam: gpu.fit_kernels().adam.bind(
+            adam: StepKernels::of(gpu).adam.bind(
                 device,
                 &[
                     &f.fit,
@@ -467,7 +386,7 @@ mod tests {
         let Some(gpu) = gpu() else { return };
         let t = target(120, 90, Blend::Alpha);
         let fitter = Fitter::new(&t, 150, Init::Adaptive, Blend::Alpha, Loss::L2, 1);
-        let mut adam = crate::fit::params::Adam::new(&fitter.params).state();
+        let mut adam = crate::optim::Adam::new(&fitter.params);
         adam.step = 0;
         let mut r = ResidentFit::new(&gpu, &t, Blend::Alpha, &fitter.params, &adam).unwrap();
         r.lists = Lists::new(&gpu, &r.forward, &r.back, Blend::Alpha, 8).unwrap();
@@ -494,7 +413,7 @@ mod tests {
         for blend in [Blend::Sum, Blend::Alpha] {
             let t = target(1, 1, blend);
             let fitter = Fitter::new(&t, 3, Init::Adaptive, blend, Loss::L2, 2);
-            let adam = crate::fit::params::Adam::new(&fitter.params).state();
+            let adam = crate::optim::Adam::new(&fitter.params);
             let mut r = ResidentFit::new(&gpu, &t, blend, &fitter.params, &adam).unwrap();
             for _ in 0..3 {
                 let report = r.step(&LR, None, true).unwrap().unwrap();
@@ -502,7 +421,7 @@ mod tests {
             }
             let mut off = fitter.params.clone();
             off.positions.iter_mut().for_each(|p| *p = [5.0, -3.0]);
-            let adam = crate::fit::params::Adam::new(&off).state();
+            let adam = crate::optim::Adam::new(&off);
             let mut r = ResidentFit::new(&gpu, &t, blend, &off, &adam).unwrap();
             let report = r.step(&LR, Some(crate::fit::default_bits(1, 1, blend)), true);
             let report = report.unwrap().unwrap();

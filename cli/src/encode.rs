@@ -150,11 +150,13 @@ pub fn run(args: Args) -> Result<(), Failure> {
         bar.set_position(u64::from(p.iteration));
         bar.set_message(format!("N {}  PSNR {:.2} dB", p.gaussians, p.psnr));
     };
-    let encoded = match device::open(args.device, "fitting", args.quiet)? {
-        Some(gpu) => fit::encode_on_gpu(&target, &opts, &gpu, &mut progress)?,
-        None => fit::encode(&target, &opts, &mut progress)?,
-    };
+    let gpu = device::open(args.device, "fitting", args.quiet)?;
+    let on = gpu.as_ref().map_or(gsi::Device::Cpu, gsi::Device::Gpu);
+    let encoded = fit::encode(&target, &opts, on, &mut progress)?;
     bar.finish_and_clear();
+    if let (Some(why), false) = (&encoded.fallback, args.quiet) {
+        eprintln!("gsi: {why}");
+    }
     io::write_output(&args.output, &encoded.bytes)
         .map_err(|e| Failure(format!("{}: {e}", args.output.display())))?;
     if !args.quiet {

@@ -63,13 +63,19 @@ pub fn section(lol: &Path, out_dir: &Path, limit: usize) {
             budget: Budget::Bpp(BPP),
             ..EncodeOptions::default()
         };
-        let e = encode(&target, &enc_opts, &mut |_| {}).expect("encode");
+        let e = encode(&target, &enc_opts, gsi::Device::Cpu, &mut |_| {}).expect("encode");
         let encode_s = t0.elapsed().as_secs_f64();
         let file = ChunkedFile::parse(&e.bytes, Limits::default()).expect("own file parses");
         let t0 = Instant::now();
-        let (kept, fitted) =
-            gsi::enhance::enhance(&file, &opts, true, &Limits::default(), &mut |_| {})
-                .expect("enhance");
+        let (kept, fitted) = gsi::enhance::enhance(
+            &file,
+            &opts,
+            true,
+            &Limits::default(),
+            gsi::Device::Cpu,
+            &mut |_| {},
+        )
+        .expect("enhance");
         let enhance_s = t0.elapsed().as_secs_f64();
         let discarded = gsi::enhance::apply_from(
             &file,
@@ -94,9 +100,15 @@ pub fn section(lol: &Path, out_dir: &Path, limit: usize) {
             },
             ..opts.clone()
         };
-        let (paper, _) =
-            gsi::enhance::enhance(&file, &paper_opts, false, &Limits::default(), &mut |_| {})
-                .expect("enhance");
+        let (paper, _) = gsi::enhance::enhance(
+            &file,
+            &paper_opts,
+            false,
+            &Limits::default(),
+            gsi::Device::Cpu,
+            &mut |_| {},
+        )
+        .expect("enhance");
         let px = f64::from(w * h);
         let row = Row {
             image: name.clone(),

@@ -17,14 +17,15 @@
 //! On a software adapter (lavapipe) it still runs, and says that its timings are not GPU
 //! figures. `--quick` shrinks everything to check that the tool works.
 
-use gsi::fit::{encode_on_gpu, Budget, EncodeOptions, Target};
+use gsi::fit::{encode, Budget, EncodeOptions, Target};
 use gsi::gpu::{Gpu, GpuScene};
+use gsi::Device;
 use serde_json::json;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 fn main() {
-    let shared = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/kodak");
+    let shared = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/..")).join("../shared/data/kodak");
     let (mut kodak, mut limit, mut quick, mut out) =
         (shared, usize::MAX, false, PathBuf::from("bench/gpu.json"));
     let mut args = std::env::args().skip(1);
@@ -71,7 +72,7 @@ fn main() {
             iterations: if quick { 20 } else { 300 },
             ..EncodeOptions::default()
         };
-        let encoded = encode_on_gpu(&landscape, &opts, &gpu, &mut |_| {}).expect("fit");
+        let encoded = encode(&landscape, &opts, Device::Gpu(&gpu), &mut |_| {}).expect("fit");
         let scene = encoded.records.to_scene();
         let resident = GpuScene::new(&gpu, &scene, 768, 512).expect("upload");
         resident.draw(frames / 10 + 1).expect("GPU");
@@ -118,7 +119,7 @@ fn main() {
         let (mut seconds, mut psnr) = (Vec::new(), Vec::new());
         for t in &targets {
             let start = Instant::now();
-            let e = encode_on_gpu(t, &opts, &gpu, &mut |_| {}).expect("fit");
+            let e = encode(t, &opts, Device::Gpu(&gpu), &mut |_| {}).expect("fit");
             seconds.push(start.elapsed().as_secs_f64());
             psnr.push(e.psnr);
         }

@@ -1,6 +1,5 @@
 //! Stage 2 in the container: what `gsi enhance` promises about bytes, and that its
 //! outputs stay finite and in range on degenerate inputs.
-#![cfg(feature = "cli")]
 
 use gsi::enhance::fit::{fit, scene_luma, EnhanceOptions};
 use gsi::enhance::{self, features::FeatureBank, loss::LossParams, Enhancer};
@@ -49,9 +48,16 @@ fn payload(f: &ChunkedFile, ty: ChunkType) -> Option<&[u8]> {
 
 fn enhanced(bytes: &[u8], keep: bool) -> Vec<u8> {
     let file = parse(bytes);
-    enhance::enhance(&file, &quick(), keep, &Limits::default(), &mut |_| {})
-        .unwrap()
-        .0
+    enhance::enhance(
+        &file,
+        &quick(),
+        keep,
+        &Limits::default(),
+        gsi::Device::Cpu,
+        &mut |_| {},
+    )
+    .unwrap()
+    .0
 }
 
 /// Every colour record finite and within the operators' clamp or the original range,
@@ -79,6 +85,7 @@ fn geometry_is_copied_byte_for_byte_and_only_colours_change() {
             &opts,
             true,
             &Limits::default(),
+            gsi::Device::Cpu,
             &mut |_| {},
         )
         .unwrap()
@@ -194,7 +201,7 @@ fn one_operator_and_extreme_exposures_stay_finite_and_in_range() {
         },
     ];
     for opts in cases {
-        let f = fit(&scene, &opts, &FeatureBank, &mut |p| {
+        let f = fit(&scene, &opts, &FeatureBank, gsi::Device::Cpu, &mut |p| {
             assert!(p.terms.total.is_finite() && p.map.tv.is_finite() && p.map.entropy.is_finite());
         });
         for c in f.colors.iter().flatten() {
@@ -223,6 +230,7 @@ fn one_operator_and_extreme_exposures_stay_finite_and_in_range() {
             ..quick()
         },
         &FeatureBank,
+        gsi::Device::Cpu,
         &mut |_| {},
     );
     assert_eq!(f.colors, scene.gaussians.colors);

@@ -1,5 +1,4 @@
 //! The `gsi` binary end to end: exit codes, messages, stdin/stdout, atomic output.
-#![cfg(feature = "cli")]
 
 use gsi::synth::SplitMix64;
 use std::io::Write;
@@ -26,6 +25,7 @@ fn gsi_stdin(args: &[&str], input: &[u8]) -> Output {
     child.wait_with_output().unwrap()
 }
 
+#[path = "../../tests/common/mod.rs"]
 mod common;
 use common::corpus;
 
@@ -397,4 +397,59 @@ fn encode_refuses_what_it_cannot_do() {
         Some(2)
     );
     std::fs::remove_dir_all(dir).unwrap();
+}
+
+/// A reader that stops early (`gsi info f | head -1`) closes the pipe: `gsi` stops quietly,
+/// with exit 0 and no panic, where `println!` would panic on the broken pipe.
+#[test]
+fn a_closed_stdout_is_not_a_panic() {
+    let file = corpus("valid")[0].clone();
+    for args in [
+        vec!["info", file.to_str().unwrap()],
+        vec!["info", "--json", file.to_str().unwrap()],
+    ] {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_gsi"))
+            .args(&args)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        drop(child.stdout.take()); // nobody reads
+        let out = child.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "{args:?}: {err}");
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+    }
+}
+
+/// A header edited to claim a large image (CRC fixed) decodes at that size on the CPU's
+/// 8-bit path (BENCHMARKS.md measures its memory against the float path's).
+#[test]
+fn an_enlarged_header_decodes_at_its_size() {
+    let src = std::fs::read(&corpus("valid")[0]).unwrap();
+    // GHDR is the first chunk: signature (8), length (4), type (4), payload (18), CRC (4).
+    let mut bytes = src.clone();
+    bytes[16 + 2..16 + 6].copy_from_slice(&3000u32.to_be_bytes());
+    bytes[16 + 6..16 + 10].copy_from_slice(&2000u32.to_be_bytes());
+    let crc = gsi::format::chunk_crc(gsi::format::ChunkType::HEADER, &bytes[16..34]);
+    bytes[34..38].copy_from_slice(&crc.to_be_bytes());
+    let dir = tmp_dir("huge");
+    let (input, output) = (dir.join("big.gsi"), dir.join("big.png"));
+    std::fs::write(&input, &bytes).unwrap();
+    let out = gsi(&[
+        "decode",
+        input.to_str().unwrap(),
+        "-o",
+        output.to_str().unwrap(),
+        "--device",
+        "cpu",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let img = image::open(&output).unwrap();
+    assert_eq!((img.width(), img.height()), (3000, 2000));
+    std::fs::remove_dir_all(&dir).unwrap();
 }

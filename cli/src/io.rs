@@ -52,3 +52,16 @@ fn temp_sibling(path: &Path) -> PathBuf {
         .unwrap_or_default();
     path.with_file_name(format!(".{name}.gsi-tmp-{}", std::process::id()))
 }
+
+/// Print `text` and a newline on standard output. A reader that stops early (`gsi info f |
+/// head`) closes the pipe: that ends the output quietly, where `println!` would panic.
+pub fn print_line(text: &str) -> Result<(), crate::Failure> {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    match writeln!(out, "{text}").and_then(|()| out.flush()) {
+        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => {
+            Err(crate::Failure(format!("standard output: {e}")))
+        }
+        _ => Ok(()),
+    }
+}

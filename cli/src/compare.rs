@@ -84,7 +84,7 @@ pub fn run(args: Args) -> Result<(), Failure> {
             .iter()
             .map(|&(k, v, _)| (k.to_string(), finite_or_null(v)))
             .collect();
-        println!("{}", serde_json::to_string_pretty(&Value::Object(map))?);
+        crate::io::print_line(&serde_json::to_string_pretty(&Value::Object(map))?)?;
     } else {
         for (k, v, unit) in rows {
             let v = if v.is_finite() {
@@ -92,7 +92,7 @@ pub fn run(args: Args) -> Result<(), Failure> {
             } else {
                 format!("{:>10}", "inf")
             };
-            println!("{}", format!("{k:<8} {v} {unit}").trim_end());
+            crate::io::print_line(format!("{k:<8} {v} {unit}").trim_end())?;
         }
     }
     Ok(())

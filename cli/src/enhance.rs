@@ -198,12 +198,13 @@ pub fn run(args: Args) -> Result<(), Failure> {
                 bar.set_message(format!("loss {:.3}", p.terms.total));
             }
         };
-        let (out, fitted) = match &gpu {
-            Some(gpu) => enhance::enhance_on_gpu(&file, &opts, keep, &limits, gpu, &mut progress),
-            None => enhance::enhance(&file, &opts, keep, &limits, &mut progress),
-        }
-        .map_err(named)?;
+        let on = gpu.as_ref().map_or(gsi::Device::Cpu, gsi::Device::Gpu);
+        let (out, fitted) =
+            enhance::enhance(&file, &opts, keep, &limits, on, &mut progress).map_err(named)?;
         bar.finish_and_clear();
+        if let Some(why) = &fitted.fallback {
+            say(format!("gsi: {why}"));
+        }
         say(format!(
             "enhanced: mean luma {:.3} -> {:.3}, K {}, {} iterations, {:.1} s",
             fitted.mean_luma.0,

@@ -1,22 +1,24 @@
 //! The C example, compiled with `cc` against libgsi.a, decodes the corpus to the same
 //! pixels as `gsi decode` and turns every malformed file into an error code.
-#![cfg(all(feature = "capi", feature = "cli"))]
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+#[path = "../../tests/common/mod.rs"]
 mod common;
 use common::corpus;
 
 /// Build the static library the way a C user would (`cargo build --lib`): the test
 /// harness itself builds the crate as an rlib only. Returns the path of `libgsi.a`.
 fn build_staticlib() -> PathBuf {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let root = common::repo_root();
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let out = Command::new(cargo)
         .current_dir(root)
         .args([
             "build",
+            "-p",
+            "gsi",
             "--lib",
             "--no-default-features",
             "--features",
@@ -45,7 +47,7 @@ fn build_staticlib() -> PathBuf {
 }
 
 fn build_example(dir: &Path) -> PathBuf {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let root = common::repo_root();
     let lib = build_staticlib();
     let exe = dir.join("decode_c");
     let out = Command::new(std::env::var("CC").unwrap_or_else(|_| "cc".into()))

@@ -5,6 +5,7 @@
 
 use gsi::metrics::{self, MetricError, Rgb8};
 
+#[path = "../../tests/common/mod.rs"]
 mod common;
 
 use common::Lcg;
@@ -225,14 +226,13 @@ fn psnr_of_a_known_error() {
     );
 }
 
-#[cfg(feature = "cli")]
 mod on_shared_data {
     use super::*;
     use std::path::{Path, PathBuf};
 
     /// `../shared/data` beside the repository, or `None` (with a note) where it is absent.
     fn data_dir() -> Option<PathBuf> {
-        let d = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data");
+        let d = common::repo_root().join("../shared/data");
         if d.join("LOL/eval15/low").is_dir() && d.join("kodak").is_dir() {
             Some(d)
         } else {
