@@ -35,7 +35,7 @@ fn operators(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) grou
     let raw = output(g, op);
     // d out / d η = w·c·exp(η) = w·raw where no clamp is active.
     let live = (raw > vec3<f32>(shape.lo)) & (raw < vec3<f32>(shape.hi))
-        & (abs(raw) < abs(c) * shape.gain_max);
+        & (abs(raw) < abs(c) * exp(shape.gain_log_max));
     let gy = select(vec3<f32>(0.0), trace[trace_w(g) + op] * gc * raw, live);
     let g_eta = gy.x + gy.y + gy.z;
     back[back_eta(g, op)] = g_eta;

@@ -20,14 +20,16 @@ struct Mix {
     // The operators' output clamp.
     lo: f32,
     hi: f32,
-    // `GAIN_LOG_MAX` and its exponential, as the CPU computes it.
+    // `GAIN_LOG_MAX`. The shaders take its exponential themselves, so that the gain clamp
+    // compares numbers computed on one device (a CPU `exp` beside a GPU one can differ
+    // by an ulp and give a saturated operator a gradient the CPU gives none).
     gain_log_max: f32,
-    gain_max: f32,
     // Gaussians per partial sum (`enhance::fit::CHUNK`).
     chunk: u32,
     _pad0: u32,
     _pad1: u32,
     _pad2: u32,
+    _pad3: u32,
 }
 
 @group(0) @binding(0) var<uniform> shape: Mix;

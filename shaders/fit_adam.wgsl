@@ -120,8 +120,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) groups: v
         let a = sigma.x * fw * fw;
         let c = sigma.z * fh * fh;
         let bb = sigma.y * fw * fh;
-        let sn = sin(th);
-        let cs = cos(th);
+        let sn = sin(wrap_angle(th));
+        let cs = cos(wrap_angle(th));
         let cc = cs * cs;
         let ss = sn * sn;
         let sc = sn * cs;

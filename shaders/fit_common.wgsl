@@ -46,14 +46,22 @@ struct Fit {
 
 @group(0) @binding(0) var<uniform> fit: Fit;
 
+// θ reduced to [-π, π], where Vulkan, Metal and DX12 bound the error of `sin` and `cos`
+// (outside it they promise nothing; lavapipe happens to reduce exactly). Inside that
+// range it returns θ itself, bit for bit, so the CPU's figures are unchanged there.
+fn wrap_angle(th: f32) -> f32 {
+    let tau = 6.2831855;
+    return th - tau * round(th / tau);
+}
+
 // `CovParam::LogScaleRotation.covariance`: Σ = R diag(σ1², σ2²) Rᵀ in image units, as
 // (Σuu, Σuv, Σvv), σ = exp of the clamped log-scale. The projection and the chain rule
 // both take it from here, so the clamps they test see the same numbers.
 fn lsr_covariance(l1: f32, l2: f32, th: f32) -> vec3<f32> {
     let s1 = exp(clamp(l1, LN_SIGMA_MIN, LN_SIGMA_MAX));
     let s2 = exp(clamp(l2, LN_SIGMA_MIN, LN_SIGMA_MAX));
-    let sn = sin(th);
-    let cs = cos(th);
+    let sn = sin(wrap_angle(th));
+    let cs = cos(wrap_angle(th));
     let v1 = s1 * s1;
     let v2 = s2 * s2;
     return vec3<f32>(cs * cs * v1 + sn * sn * v2, sn * cs * (v1 - v2), sn * sn * v1 + cs * cs * v2);

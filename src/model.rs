@@ -12,6 +12,8 @@
 use crate::contract::{CHOLESKY_MAX, LN_SIGMA_MAX, LN_SIGMA_MIN};
 
 /// How overlapping Gaussians combine into a pixel colour.
+// Not `#[non_exhaustive]`: the set is the file format's (spec §4), and a new mode would be
+// a new major version, which callers should have to handle.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Blend {
     /// `C(p) = Σ c_i α_i(p)`, order-free (GaussianImage's accumulated summation).
@@ -30,6 +32,7 @@ impl Blend {
 }
 
 /// How the three covariance parameters of a Gaussian are to be read.
+// Closed by the format's major version, like [`Blend`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum CovParam {
     /// `(l11, l21, l22)`: `Σ = L Lᵀ` with `L = [[l11, 0], [l21, l22]]`.

@@ -1,36 +1,86 @@
 #!/bin/sh
 # Prepare `.gpukit/`, what a machine with a GPU and no network or Rust toolchain needs to
-# measure the GPU figures of BENCHMARKS.md (issue 4): the `gpu_bench` example built
-# here (x86-64), the Kodak images, and the Vulkan loader packages. Then, with the
-# `device` tool of this workplace:
+# measure the GPU figures of BENCHMARKS.md and to run the GPU tests there: the
+# `gpu_bench` example, the GPU test binaries (`cli/tests/gpu.rs` and the library's unit
+# tests of its GPU twins) and the `gsi` binary they call, all built here (x86-64) and
+# stripped, the Kodak images, and the Vulkan loader package. Then, with the `device` tool
+# of this workplace:
 #
 #   run(carry=[".gpukit"], command="sh tools/gpu-kit.sh --run")
 #
-# which unpacks the loader, runs the benchmark and leaves bench/gpu.json in $OUT.
+# which unpacks the loader, runs the GPU tests with GSI_REQUIRE_GPU=1 and prints their
+# margins (gradient relative errors, parameter differences against their bounds, pixel
+# flips, round trips per step), then the benchmark (`GPU_BENCH_ARGS`, by default
+# `--limit 4` images for the time-to-32 dB sweep, to stay well inside ten minutes), and
+# leaves the logs and bench/gpu.json in $OUT.
+#
+#   sh tools/gpu-kit.sh --dry-run
+#
+# does the same here, on whatever adapter wgpu finds (lavapipe in CI's image) and with
+# `--quick` for the benchmark: the whole report of a GPU run, with software figures.
 set -eu
 cd "$(dirname "$0")/.."
 kit=.gpukit
 
-if [ "${1:-}" = "--run" ]; then
+run_kit() {
+    out="${OUT:-bench/gpukit}"
+    mkdir -p "$out"
+    export GSI_REQUIRE_GPU=1 GSI_REPO="$PWD" GSI_BIN="$PWD/$kit/gsi"
+    export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-$(mktemp -d)}"
+    status=0
+    for t in tests-gpu tests-lib; do
+        filter=""
+        # The library's unit tests of its GPU twins and of what they share.
+        [ "$t" = tests-lib ] && filter="gpu resident"
+        echo "==> $t $filter"
+        # shellcheck disable=SC2086
+        if ! "$kit/$t" $filter --test-threads=1 --nocapture >"$out/$t.log" 2>&1; then
+            status=1
+        fi
+        grep -E '^test result|FAILED|panicked' "$out/$t.log" || true
+    done
+    echo "==> margins"
+    grep -h -E '^(margin|adapter):' "$out"/tests-*.log | sort | uniq || true
+    grep -h -E 'relative error' "$out"/tests-lib.log || true
+    echo "==> gpu_bench ${GPU_BENCH_ARGS:---limit 4}"
+    # shellcheck disable=SC2086
+    "$kit/gpu_bench" --kodak "$kit/kodak" --out "$out/gpu.json" ${GPU_BENCH_ARGS:---limit 4} || status=1
+    return $status
+}
+
+case "${1:-}" in
+--run)
     for f in "$kit"/gl/*.deb; do dpkg -x "$f" /; done
     ldconfig
     if [ -f /usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json ]; then
         export VK_DRIVER_FILES=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json
     fi
     nvidia-smi --query-gpu=name,driver_version --format=csv,noheader || true
-    out="${OUT:-bench}"
-    mkdir -p "$out"
-    WGPU_BACKEND=vulkan "$kit/gpu_bench" --kodak "$kit/kodak" --out "$out/gpu.json" ${GPU_BENCH_ARGS:-}
-    exit
-fi
+    export WGPU_BACKEND=vulkan
+    run_kit
+    exit $?
+    ;;
+--dry-run)
+    GPU_BENCH_ARGS="${GPU_BENCH_ARGS:---quick}"
+    run_kit
+    exit $?
+    ;;
+esac
 
 exclude="$(git rev-parse --git-path info/exclude)"
 mkdir -p "$(dirname "$exclude")"
 grep -qx "/$kit/" "$exclude" 2>/dev/null || echo "/$kit/" >>"$exclude"
 mkdir -p "$kit/kodak" "$kit/gl" /tmp/gsi-apt/partial
-cargo build --release --example gpu_bench
-cp target/release/examples/gpu_bench "$kit/"
-strip "$kit/gpu_bench"
+cargo build --release --example gpu_bench -p gsi-cli
+cargo build --release --bin gsi -p gsi-cli
+cp target/release/examples/gpu_bench target/release/gsi "$kit/"
+# The test binaries, as cargo names them in its JSON messages.
+exe_of() {
+    grep '"executable":"/' | sed 's/.*"executable":"\([^"]*\)".*/\1/' | head -n 1
+}
+cp "$(cargo test --release --no-run -p gsi-cli --test gpu --message-format=json 2>/dev/null | exe_of)" "$kit/tests-gpu"
+cp "$(cargo test --release --no-run -p gsi --lib --features encode,gpu --message-format=json 2>/dev/null | exe_of)" "$kit/tests-lib"
+strip "$kit/gpu_bench" "$kit/gsi" "$kit/tests-gpu" "$kit/tests-lib"
 cp ../shared/data/kodak/*.png "$kit/kodak/"
 o='-oAPT::Architecture=amd64 -oAPT::Architectures=amd64 -oDir::State::Lists=/tmp/gsi-apt'
 # shellcheck disable=SC2086

@@ -73,7 +73,7 @@ pub fn run(args: Args) -> Result<(), Failure> {
             Ok(image) => image.to_rgb8(),
             // Too large for this adapter's buffers: `auto` falls back, `gpu` fails.
             Err(e)
-                if e.kind() == gsi::format::ErrorKind::LimitExceeded
+                if e.kind() == gsi::gpu::ErrorKind::LimitExceeded
                     && args.device == DeviceArg::Auto =>
             {
                 eprintln!("gsi: {e}; decoding on the CPU");

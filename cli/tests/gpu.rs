@@ -63,15 +63,26 @@ fn gpu_matches_cpu_on_the_corpus_within_one_level() {
     );
 }
 
+/// What a conforming GPU may do differently from the CPU, which these parity tests allow
+/// for and no more. Vulkan's SPIR-V precision rules (which wgpu's Metal and DX12 backends
+/// do not tighten) promise: `+`, `-`, `*` correctly rounded, but naga marks nothing
+/// `NoContraction`, so a driver may fuse `a * b + c` into one rounding (Metal compiles
+/// with fast math); `x / y` to 2.5 ulp; `sqrt` as `1 / inversesqrt`, 2 ulp; `exp` to
+/// 3 + 2·|x| ulp; `sin`/`cos` to an absolute 2^-11, and only inside [-π, π] (the shaders
+/// reduce θ there first). So a pixel where a Gaussian's alpha is within those errors of
+/// `ALPHA_MIN`, or on the edge of its 3σ box, may flip; elsewhere values agree to a level.
+///
 /// A scene resident on the GPU, projected and binned there, draws the CPU's pixels on the
 /// corpus (both covariance parameterizations and blend modes): every 8-bit value within 1
-/// of the CPU's but for pixels on the edge of a Gaussian's box, where the GPU's own
-/// `sin`/`exp` may put the edge one pixel over (allowed: 1 value in 10⁴, by at most 3;
-/// lavapipe has none).
+/// of the CPU's, except on the one-pixel rim of some Gaussian's box, where the GPU's own
+/// arithmetic may move the edge by a pixel (by at most 3 levels there). Lavapipe has
+/// no such flip; the margins are printed for hardware runs (`tools/gpu-kit.sh`).
 #[test]
 fn a_resident_scene_draws_the_cpu_pixels() {
     let Some(gpu) = gpu() else { return };
     let mut params = [0, 0];
+    // Values compared, values off by more than 1 (all on box rims), worst difference.
+    let mut totals = (0usize, 0usize, 0u8);
     for path in common::corpus("valid") {
         let file = read_file(std::fs::File::open(&path).unwrap(), Limits::default()).unwrap();
         let scene = file.records.to_scene();
@@ -88,20 +99,62 @@ fn a_resident_scene_draws_the_cpu_pixels() {
             assert!(img.data.iter().all(|x| x.is_finite()));
             let img = img.to_rgb8();
             let diffs: Vec<u8> = cpu.iter().zip(&img).map(|(a, b)| a.abs_diff(*b)).collect();
-            let off = diffs.iter().filter(|d| **d > 1).count();
+            let rim = box_rims(&scene, ow, oh);
+            let off: Vec<usize> = (0..diffs.len()).filter(|&i| diffs[i] > 1).collect();
             let worst = diffs.iter().copied().max().unwrap_or(0);
+            let stray = off.iter().filter(|&&i| !rim[i / 3]).count();
+            totals.0 += diffs.len();
+            totals.1 += off.len();
+            totals.2 = totals.2.max(worst);
             assert!(
-                off * 10_000 <= diffs.len() && worst <= 3,
-                "{} at {ow}x{oh}: {off} of {} values off by more than 1, worst {worst}",
+                stray == 0 && worst <= 3,
+                "{} at {ow}x{oh}: {} values off by more than 1, {stray} of them off every \
+                 box rim, worst {worst}",
                 path.display(),
-                diffs.len()
+                off.len()
             );
         }
     }
+    eprintln!(
+        "margin: resident pixels: {} of {} values off by more than 1 (all on box rims), \
+         worst {}/255",
+        totals.1, totals.0, totals.2
+    );
     assert!(
         params[0] > 0 && params[1] > 0,
         "both covariance parameterizations: {params:?}"
     );
+}
+
+/// Pixels within one pixel of the edge of some Gaussian's box (as the CPU projects it):
+/// where a GPU's rounding may move the edge.
+fn box_rims(scene: &gsi::Scene, w: u32, h: u32) -> Vec<bool> {
+    let mut rim = vec![false; w as usize * h as usize];
+    let mut mark = |x: i64, y: i64| {
+        if (0..i64::from(w)).contains(&x) && (0..i64::from(h)).contains(&y) {
+            rim[y as usize * w as usize + x as usize] = true;
+        }
+    };
+    for g in gsi::render::project_scene(scene, w, h) {
+        let b = g.bbox;
+        let (x0, y0, x1, y1) = (
+            i64::from(b.x0),
+            i64::from(b.y0),
+            i64::from(b.x1),
+            i64::from(b.y1),
+        );
+        for x in x0 - 1..=x1 + 1 {
+            for y in [y0 - 1, y0, y1, y1 + 1] {
+                mark(x, y);
+            }
+        }
+        for y in y0 - 1..=y1 + 1 {
+            for x in [x0 - 1, x0, x1, x1 + 1] {
+                mark(x, y);
+            }
+        }
+    }
+    rim
 }
 
 #[test]
@@ -120,7 +173,7 @@ fn bands_split_by_the_binding_limit_give_the_same_image() {
         // A limit below one tile row's output is refused with a clear error.
         small.limit_bindings(1000);
         let e = small.render(&scene, 200, 150).unwrap_err();
-        assert_eq!(e.kind(), gsi::format::ErrorKind::LimitExceeded);
+        assert_eq!(e.kind(), gsi::gpu::ErrorKind::LimitExceeded);
         gpu.limit_bindings(u64::MAX);
     }
 }
@@ -151,13 +204,13 @@ fn cli_decode_on_the_gpu_and_a_missing_adapter() {
         .into_iter()
         .find(|p| p.to_string_lossy().contains("alpha-lsr-500"))
         .unwrap();
-    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("gpu-cli");
+    let dir = common::scratch_dir(env!("CARGO_TARGET_TMPDIR")).join("gpu-cli");
     std::fs::create_dir_all(&dir).unwrap();
     // Mesa's window-system probe complains on stderr when this is unset.
     let xdg = dir.join("xdg");
     std::fs::create_dir_all(&xdg).unwrap();
     let run = |device: &str, out: &str, env: &[(&str, &str)]| {
-        let mut cmd = std::process::Command::new(env!("CARGO_BIN_EXE_gsi"));
+        let mut cmd = std::process::Command::new(common::gsi_exe(env!("CARGO_BIN_EXE_gsi")));
         cmd.args([
             "decode",
             file.to_str().unwrap(),
@@ -177,7 +230,7 @@ fn cli_decode_on_the_gpu_and_a_missing_adapter() {
     assert!(run("gpu", "g.png", &[]).status.success());
     assert!(run("cpu", "c.png", &[]).status.success());
     // The two PNGs agree to at most one level per value: PSNR above 48 dB.
-    let cmp = std::process::Command::new(env!("CARGO_BIN_EXE_gsi"))
+    let cmp = std::process::Command::new(common::gsi_exe(env!("CARGO_BIN_EXE_gsi")))
         .args(["compare", "--json"])
         .arg(dir.join("c.png"))
         .arg(dir.join("g.png"))
@@ -246,7 +299,9 @@ fn gradients_match(blend: Blend, w: u32, h: u32) {
             }
         }
         let rel = (diff / norm.max(1e-30)).sqrt();
-        eprintln!("{blend:?} {w}x{h} {name}: relative error {rel:.2e}");
+        eprintln!(
+            "margin: gradient {blend:?} {w}x{h} {name}: relative error {rel:.2e} (bound 1e-3)"
+        );
         assert!(
             norm > 0.0 && rel <= 1e-3,
             "{blend:?} {w}x{h} {name}: relative error {rel}"
@@ -293,8 +348,11 @@ fn a_gpu_fit_matches_a_cpu_fit() {
 }
 
 /// The fitting loop resident on the GPU takes the CPU's steps: from the same start, the
-/// same losses, PSNRs and parameters after several Adam steps (quantization-aware ones
-/// included), both blend modes.
+/// same losses and PSNRs, and parameters after several Adam steps (quantization-aware ones
+/// included) within what Adam can make of rounding: Adam divides a gradient by its own
+/// running scale, so a near-zero gradient whose sign differs by rounding moves a parameter
+/// by up to its learning rate the other way. Each parameter is held to 2·lr per step taken,
+/// which any conforming GPU meets; lavapipe's actual differences are far smaller (printed).
 #[test]
 fn resident_steps_follow_the_cpu_steps() {
     use gsi::fit::{default_bits, Fitter, Init, LearningRates, Loss};
@@ -339,7 +397,26 @@ fn resident_steps_follow_the_cpu_steps() {
                 })
                 .collect()
         };
+        // Learning rate of each flattened component: u, v, ln σ1, ln σ2, θ, r, g, b, (o).
+        let per = if p.opacity.is_some() { 9 } else { 8 };
         let (p, q) = (flat(p), flat(q));
+        let rate = |k: usize| match k % per {
+            0 | 1 => lr.position,
+            2 | 3 => lr.log_scale,
+            4 => lr.rotation,
+            5..=7 => lr.color,
+            _ => lr.opacity,
+        };
+        let mut worst = 0f32;
+        for (k, (a, b)) in p.iter().zip(&q).enumerate() {
+            let bound = 2.0 * 12.0 * rate(k);
+            worst = worst.max((a - b).abs() / bound);
+            assert!(
+                (a - b).abs() <= bound,
+                "{blend:?}: component {k}: {a} vs {b}"
+            );
+        }
+        eprintln!("margin: trajectory {blend:?}: worst parameter difference {worst:.2e} of its bound 2·lr·steps");
         let diff: f64 = p
             .iter()
             .zip(&q)
@@ -347,8 +424,7 @@ fn resident_steps_follow_the_cpu_steps() {
             .sum();
         let norm: f64 = p.iter().map(|a| f64::from(*a).powi(2)).sum();
         let rel = (diff / norm).sqrt();
-        eprintln!("{blend:?}: parameters after 12 steps differ by {rel:.2e} (relative)");
-        assert!(rel < 1e-4, "{blend:?}: relative difference {rel}");
+        eprintln!("margin: trajectory {blend:?}: parameters after 12 steps differ by {rel:.2e} (relative)");
     }
 }
 
@@ -426,7 +502,7 @@ fn a_resident_scene_survives_degenerate_gaussians() {
 fn cli_enhance_on_the_gpu() {
     use gsi::format::{to_bytes, BitDepths, Records, WriteOptions};
     let Some(_) = gpu() else { return };
-    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("gpu-enhance");
+    let dir = common::scratch_dir(env!("CARGO_TARGET_TMPDIR")).join("gpu-enhance");
     let xdg = dir.join("xdg");
     std::fs::create_dir_all(&xdg).unwrap();
     let mut scene = random_scene(12, SceneSpec::new(64, 48, 300, Blend::Sum));
@@ -443,7 +519,7 @@ fn cli_enhance_on_the_gpu() {
     let input = dir.join("dark.gsi");
     std::fs::write(&input, &dark).unwrap();
     let run = |args: &[&str], env: &[(&str, &str)]| {
-        let mut cmd = std::process::Command::new(env!("CARGO_BIN_EXE_gsi"));
+        let mut cmd = std::process::Command::new(common::gsi_exe(env!("CARGO_BIN_EXE_gsi")));
         cmd.args(args).env("XDG_RUNTIME_DIR", &xdg);
         for (k, v) in env {
             cmd.env(k, v);
@@ -496,4 +572,80 @@ fn cli_enhance_on_the_gpu() {
     );
     assert_eq!(out.status.code(), Some(1));
     assert_eq!(std::fs::read(&input).unwrap(), dark);
+}
+
+/// A device that does not finish in time gives an error, not a wait without end, and is
+/// usable again once the wait is long enough.
+#[test]
+fn a_wait_past_its_timeout_is_an_error() {
+    let Some(gpu) = gpu() else { return };
+    let scene = random_scene(5, SceneSpec::new(1024, 1024, 20_000, Blend::Alpha));
+    gpu.set_wait_timeout(std::time::Duration::ZERO);
+    let e = gpu
+        .render(&scene, 2048, 2048)
+        .expect_err("a 4-megapixel render finished in no time");
+    assert_eq!(e.kind(), gsi::gpu::ErrorKind::TimedOut, "{e}");
+    gpu.set_wait_timeout(gsi::gpu::DEFAULT_WAIT_TIMEOUT);
+    let img = gpu.render(&scene, 64, 64).unwrap();
+    assert!(img.data.iter().all(|v| v.is_finite()));
+}
+
+/// Host round trips per fitting step and per enhancement iteration, counted by the device
+/// (`Gpu::traffic`): the numbers a fast GPU's step time is bound by. Held to what they are
+/// (a regression guard) and printed for the kit's report.
+#[test]
+fn round_trips_per_step_and_per_iteration() {
+    use gsi::enhance::{features::FeatureBank, fit::EnhanceOptions, fit::Session};
+    use gsi::fit::{Fitter, Init, LearningRates, Loss};
+    let Some(gpu) = gpu() else { return };
+    let (w, h) = (80, 60);
+    let source = random_scene(41, SceneSpec::new(w, h, 300, Blend::Sum));
+    let mut target = gsi::render::render(&source, w, h).unwrap();
+    target.data.iter_mut().for_each(|v| *v = v.clamp(0.0, 1.0));
+    let lr = LearningRates {
+        position: 2e-4,
+        log_scale: 0.01,
+        rotation: 0.01,
+        color: 0.005,
+        opacity: 0.01,
+    };
+    let mut fitter = Fitter::new(&target, 150, Init::Adaptive, Blend::Sum, Loss::L2, 1);
+    fitter.use_gpu(&gpu);
+    fitter.step(&lr, None, false); // uploads and sizes the lists
+    let per = |f: &mut dyn FnMut()| {
+        let t0 = gpu.traffic();
+        for _ in 0..10 {
+            f();
+        }
+        let t1 = gpu.traffic();
+        (
+            (t1.submissions - t0.submissions) as f64 / 10.0,
+            (t1.read_backs - t0.read_backs) as f64 / 10.0,
+        )
+    };
+    let quiet = per(&mut || {
+        fitter.step(&lr, None, false);
+    });
+    let measured = per(&mut || {
+        fitter.step(&lr, None, true).unwrap();
+    });
+    assert_eq!(fitter.fallback(), None);
+    let scene = source.clone();
+    let opts = EnhanceOptions {
+        iterations: 10,
+        ..EnhanceOptions::default()
+    };
+    let mut session = Session::new(&scene, &opts, &FeatureBank);
+    session.use_gpu(&gpu).unwrap();
+    session.step();
+    let enhance = per(&mut || {
+        session.step();
+    });
+    eprintln!(
+        "margin: round trips per fitting step {quiet:?} (submissions, read-backs), \
+         per measured step {measured:?}, per enhancement iteration {enhance:?}"
+    );
+    assert_eq!(quiet, (1.0, 0.0));
+    assert_eq!(measured, (1.0, 1.0));
+    assert!(enhance.1 <= 2.0, "{enhance:?}");
 }

@@ -353,7 +353,7 @@ impl<'a> Session<'a> {
     /// on the CPU. Fails, leaving the session on the CPU, when the adapter cannot hold
     /// it. Should the GPU fail later, the session says so once and goes on on the CPU.
     #[cfg(feature = "gpu")]
-    pub fn use_gpu(&mut self, gpu: &'a crate::gpu::Gpu) -> crate::format::Result<()> {
+    pub fn use_gpu(&mut self, gpu: &'a crate::gpu::Gpu) -> crate::gpu::Result<()> {
         let e = &self.enh;
         self.gpu = Some(super::gpu::GpuMixture::new(
             gpu,
@@ -413,7 +413,7 @@ impl<'a> Session<'a> {
     }
 
     #[cfg(feature = "gpu")]
-    fn gpu_failed(&mut self, e: &crate::format::Error) {
+    fn gpu_failed(&mut self, e: &crate::gpu::Error) {
         self.fallback
             .get_or_insert_with(|| format!("enhancement continues on the CPU: {e}"));
         self.gpu = None;

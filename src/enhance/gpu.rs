@@ -20,8 +20,8 @@
 //! after one iteration (`enhance::fit` tests).
 
 use super::mixture::{MapTap, GAIN_LOG_MAX};
-use crate::format::{Error, ErrorKind, Result};
 use crate::gpu::{shader, too_big, Gpu, Kernel, GAUSS, WIDTH_MAX};
+use crate::gpu::{Error, ErrorKind, Result};
 
 /// The pipelines, built the first time an enhancement runs on a device.
 pub(crate) struct EnhanceKernels {
@@ -80,9 +80,8 @@ struct MixUniform {
     lo: f32,
     hi: f32,
     gain_log_max: f32,
-    gain_max: f32,
     chunk: u32,
-    _pad: [u32; 3],
+    _pad: [u32; 4],
 }
 
 /// The mixture of one enhancement fit, resident on the GPU: the Gaussians' taps and
@@ -176,9 +175,8 @@ impl<'g> GpuMixture<'g> {
                 lo: clamp[0],
                 hi: clamp[1],
                 gain_log_max: GAIN_LOG_MAX,
-                gain_max: GAIN_LOG_MAX.exp(),
                 chunk: chunk as u32,
-                _pad: [0; 3],
+                _pad: [0; 4],
             };
             let mut gauss = vec![0u32; count * GAUSS];
             for ((rec, t), c) in gauss.chunks_exact_mut(GAUSS).zip(taps).zip(c0) {
@@ -191,7 +189,7 @@ impl<'g> GpuMixture<'g> {
                 }
             }
             let device = &gpu.device;
-            let k = gpu.kernels(EnhanceKernels::new);
+            let k = gpu.kernels(EnhanceKernels::new)?;
             let mix = gpu.uniform_buffer(bytemuck::bytes_of(&uniform));
             let gauss = gpu.storage(bytemuck::cast_slice(&gauss));
             let params = gpu.zeroed(params_len as u64 * 4);
@@ -252,7 +250,7 @@ impl<'g> GpuMixture<'g> {
                 gpu.queue
                     .write_buffer(&self.params, 0, bytemuck::cast_slice(params));
             }
-            let k = gpu.kernels(EnhanceKernels::new);
+            let k = gpu.kernels(EnhanceKernels::new)?;
             let mut enc = gpu.encoder();
             gpu.pass(
                 &mut enc,
@@ -299,7 +297,7 @@ impl<'g> GpuMixture<'g> {
             let gpu = self.gpu;
             gpu.queue
                 .write_buffer(&self.g_col, 0, bytemuck::cast_slice(g_col));
-            let k = gpu.kernels(EnhanceKernels::new);
+            let k = gpu.kernels(EnhanceKernels::new)?;
             let mut enc = gpu.encoder();
             // `enhance_params` returns at once when there are no operators.
             gpu.pass(
@@ -342,5 +340,21 @@ impl<'g> GpuMixture<'g> {
             }
             Ok(())
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::MixUniform;
+    use crate::gpu::{assert_uniform_matches, shader};
+
+    /// The host's `Mix` block has the WGSL one's layout (no device needed).
+    #[test]
+    fn mix_uniform_matches_its_wgsl_layout() {
+        assert_uniform_matches!(
+            MixUniform,
+            shader!("enhance_common", "enhance_forward"),
+            [count, experts, hidden, per, lo, hi, gain_log_max, chunk]
+        );
     }
 }

@@ -17,7 +17,7 @@ pub mod features;
 #[cfg(feature = "encode")]
 pub mod fit;
 #[cfg(all(feature = "encode", feature = "gpu"))]
-pub mod gpu;
+pub(crate) mod gpu;
 #[cfg(feature = "encode")]
 pub mod loss;
 #[cfg(feature = "encode")]

@@ -11,6 +11,7 @@ use crate::model::{Blend, GaussianSet};
 use crate::rng::SplitMix64;
 
 /// How the Gaussians are initialized.
+#[non_exhaustive]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Init {
     /// Content-adaptive: density from gradient magnitude, scale from local density,

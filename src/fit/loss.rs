@@ -3,6 +3,7 @@
 use crate::metrics::{self, LossWorkspace, Rgb8};
 
 /// Which loss the fitter minimizes.
+#[non_exhaustive]
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Loss {
     /// `(1 − λ)·L1 + λ·(1 − MS-SSIM)`, the paper's Eq. 9. MS-SSIM uses as many scales

@@ -15,19 +15,25 @@
 //! `--bpp` and `--target-psnr` choose N: a file over its byte budget loses its least
 //! useful Gaussians and is fine-tuned again; a file under its quality target grows.
 
+mod error;
 pub mod init;
 pub mod loss;
+// The pieces of a step: public for the benches that time them, not part of the API.
+#[doc(hidden)]
 pub mod lsq;
+#[doc(hidden)]
 pub mod params;
+#[doc(hidden)]
 pub mod raster;
 #[cfg(feature = "gpu")]
-pub mod resident;
+pub(crate) mod resident;
 
 pub use crate::optim::LearningRates;
+pub use error::Error;
 pub use init::Init;
 pub use loss::Loss;
 
-use crate::format::{self, BitDepths, Error, ErrorKind, Records, WriteOptions};
+use crate::format::{self, BitDepths, Records, WriteOptions};
 use crate::model::{Blend, CovParam, GaussianSet, Scene};
 use crate::optim::{self, Adam};
 use crate::render::{project_scene, Projected, RgbImage};
@@ -37,6 +43,7 @@ use raster::Need;
 pub type Target = RgbImage;
 
 /// How many Gaussians to spend.
+#[non_exhaustive]
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Budget {
     Gaussians(usize),
@@ -334,7 +341,7 @@ impl<'a> Fitter<'a> {
     }
 
     #[cfg(feature = "gpu")]
-    fn gpu_failed(&mut self, e: &Error) {
+    fn gpu_failed(&mut self, e: &crate::gpu::Error) {
         self.fallback
             .get_or_insert_with(|| format!("fitting continues on the CPU: {e}"));
         self.gpu = None;
@@ -351,7 +358,7 @@ impl<'a> Fitter<'a> {
         let (w, h) = (self.target.width, self.target.height);
         #[cfg(feature = "gpu")]
         if let Some(gpu) = self.gpu {
-            let mut on_gpu = || -> Result<_, Error> {
+            let mut on_gpu = || -> crate::gpu::Result<_> {
                 let image = gpu.render_projected(projected, self.blend, w, h)?;
                 let (value, dl, psnr) = self.score(&image.data, measure);
                 let pg = gpu.backward(projected, self.blend, w, h, &dl)?;
@@ -589,8 +596,7 @@ fn finish(fitter: &mut Fitter, bits: BitDepths, opts: &EncodeOptions) -> Result<
     let records = Records::from_scene(&scene, bits);
     let decoded = crate::render::render(&records.to_scene(), t.width, t.height)?;
     if !decoded.data.iter().all(|v| v.is_finite()) {
-        return Err(Error::new(
-            ErrorKind::InvalidValue,
+        return Err(Error::NonFinite(
             "the fitted Gaussians render to non-finite values",
         ));
     }
@@ -628,20 +634,16 @@ fn finish(fitter: &mut Fitter, bits: BitDepths, opts: &EncodeOptions) -> Result<
 /// Refuse targets that cannot be fitted: empty, mis-sized, or holding non-finite values.
 fn check_target(t: &Target) -> Result<(), Error> {
     if t.width == 0 || t.height == 0 || t.data.len() != t.width as usize * t.height as usize * 3 {
-        return Err(Error::new(
-            ErrorKind::InvalidValue,
-            format!(
-                "target of {}x{} with {} values",
-                t.width,
-                t.height,
-                t.data.len()
-            ),
-        ));
+        return Err(Error::InvalidTarget(format!(
+            "target of {}x{} with {} values",
+            t.width,
+            t.height,
+            t.data.len()
+        )));
     }
     if !t.data.iter().all(|v| v.is_finite()) {
-        return Err(Error::new(
-            ErrorKind::InvalidValue,
-            "target holds non-finite values",
+        return Err(Error::InvalidTarget(
+            "target holds non-finite values".into(),
         ));
     }
     Ok(())

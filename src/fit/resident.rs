@@ -25,9 +25,10 @@
 //! Pruning, re-placement and colour solves stay on the CPU ([`crate::fit::Fitter`]): the
 //! fitter downloads the state before them and uploads it after, a few times per fit.
 
-use crate::format::{BitDepths, Error, ErrorKind, Limits, Result, MAX_BITS};
+use crate::format::{BitDepths, Limits, MAX_BITS};
 use crate::gpu::forward::{capacity_for, flatten, FitUniform, Forward, ForwardLists, STRIDE};
 use crate::gpu::{shader, too_big, Gpu, Kernel, SLOT};
+use crate::gpu::{Error, ErrorKind, Result};
 use crate::model::{Blend, GaussianSet};
 use crate::optim::{Adam, AdamRule, LearningRates};
 use crate::render::RgbImage;
@@ -50,7 +51,7 @@ impl StepKernels {
         }
     }
 
-    fn of(gpu: &Gpu) -> std::sync::Arc<StepKernels> {
+    fn of(gpu: &Gpu) -> Result<std::sync::Arc<StepKernels>> {
         gpu.kernels(StepKernels::new)
     }
 }
@@ -188,7 +189,7 @@ impl<'g> ResidentFit<'g> {
             }
             gpu.queue
                 .write_buffer(&self.forward.fit, 0, bytemuck::bytes_of(&self.uniform));
-            let k = StepKernels::of(gpu);
+            let k = StepKernels::of(gpu)?;
             let (f, b, l) = (&self.forward, &self.back, &self.lists);
             let mut enc = gpu.encoder();
             f.record_binning(gpu, &l.forward, &mut enc, qat.is_some());
@@ -205,7 +206,7 @@ impl<'g> ResidentFit<'g> {
                 ],
             );
             if !measure {
-                gpu.queue.submit([enc.finish()]);
+                gpu.submit([enc.finish()]);
                 return Ok(None);
             }
             let [loss_part, sse8_part, entries] =
@@ -294,7 +295,7 @@ impl Backward {
             0u32,
         ]));
         Ok(Backward {
-            loss: StepKernels::of(gpu).loss.bind(
+            loss: StepKernels::of(gpu)?.loss.bind(
                 device,
                 &[&f.fit, &f.image, &target, &dl, &loss_part, &sse8_part],
             ),
@@ -327,7 +328,7 @@ impl Lists {
                     &slots,
                 ],
             ),
-            adam: StepKernels::of(gpu).adam.bind(
+            adam: StepKernels::of(gpu)?.adam.bind(
                 device,
                 &[
                     &f.fit,
@@ -431,5 +432,80 @@ mod tests {
             let (after, _) = r.download().unwrap();
             assert_eq!(after, off);
         }
+    }
+
+    /// θ is read through sin and cos, whose error the GPU APIs bound only inside
+    /// [-π, π]: the same Gaussians with θ moved by whole turns far outside it must fit
+    /// as they do inside (the shaders reduce θ first).
+    #[test]
+    fn angles_far_outside_a_turn_fit_as_inside() {
+        let Some(gpu) = gpu() else { return };
+        let t = target(96, 64, Blend::Sum);
+        let fitter = Fitter::new(&t, 120, Init::Adaptive, Blend::Sum, Loss::L2, 3);
+        let inside = fitter.params.clone();
+        assert!(inside
+            .cov
+            .iter()
+            .all(|c| c[2].abs() <= std::f32::consts::PI));
+        let mut outside = inside.clone();
+        for (k, c) in outside.cov.iter_mut().enumerate() {
+            // 16 turns up or down: θ near ±100, where an f32 still holds it to 1e-5.
+            let turns = if k % 2 == 0 { 16.0 } else { -16.0 };
+            c[2] += turns * std::f32::consts::TAU;
+        }
+        let losses = |params: &GaussianSet| -> Vec<f32> {
+            let adam = crate::optim::Adam::new(params);
+            let mut r = ResidentFit::new(&gpu, &t, Blend::Sum, params, &adam).unwrap();
+            (0..6)
+                .map(|_| r.step(&LR, None, true).unwrap().unwrap().loss)
+                .collect()
+        };
+        let (a, b) = (losses(&inside), losses(&outside));
+        for (x, y) in a.iter().zip(&b) {
+            assert!(
+                (x - y).abs() <= 1e-4 * x.abs().max(1e-6),
+                "{a:?} against {b:?}"
+            );
+        }
+    }
+
+    /// A kernel whose shader does not compile (as a vendor compiler may refuse what
+    /// lavapipe takes) is an error, the fit finishes on the CPU with the reason in its
+    /// result, and nothing broken is cached: the next fit on the same device runs there.
+    #[test]
+    fn a_shader_that_does_not_compile_gives_an_error_and_the_cpu() {
+        use crate::fit::{encode, Budget, EncodeOptions};
+        use crate::Device;
+        let Some(gpu) = gpu() else { return };
+        let t = target(64, 48, Blend::Sum);
+        let opts = EncodeOptions {
+            budget: Budget::Gaussians(60),
+            iterations: 12,
+            ..EncodeOptions::default()
+        };
+        let cpu = encode(&t, &opts, Device::Cpu, &mut |_| {}).unwrap();
+
+        crate::gpu::break_shaders_on_this_thread(true);
+        // A device whose own kernels do not build is not opened.
+        let refused = crate::gpu::Gpu::new()
+            .err()
+            .expect("a broken shader was accepted");
+        assert_eq!(
+            refused.kind(),
+            crate::gpu::ErrorKind::Unavailable,
+            "{refused}"
+        );
+        let broken = encode(&t, &opts, Device::Gpu(&gpu), &mut |_| {});
+        crate::gpu::break_shaders_on_this_thread(false);
+        let broken = broken.unwrap();
+        let why = broken.fallback.expect("no fallback reported");
+        assert!(why.contains("GPU"), "{why}");
+        assert_eq!(
+            broken.bytes, cpu.bytes,
+            "the CPU did not take the whole fit"
+        );
+
+        let again = encode(&t, &opts, Device::Gpu(&gpu), &mut |_| {}).unwrap();
+        assert_eq!(again.fallback, None, "a failed build was cached");
     }
 }

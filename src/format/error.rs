@@ -4,6 +4,7 @@ use super::chunk::ChunkType;
 use std::fmt;
 
 /// What went wrong, as a stable category (the corpus test and the CLI rely on it).
+#[non_exhaustive]
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum ErrorKind {
     /// The underlying reader or writer failed.

@@ -16,6 +16,7 @@ pub const HEADER_LEN: usize = 18;
 pub const FLAG_IMPORTANCE_ORDERED: u8 = 1;
 
 /// Colour space of the colour records.
+#[non_exhaustive]
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum ColorSpace {
     /// sRGB-encoded R, G, B (the transfer curve is applied: values are display values).

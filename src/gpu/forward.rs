@@ -1,14 +1,19 @@
 //! The forward half of the resident pipeline: Gaussians uploaded once, then projected,
-//! binned and rendered on the GPU with nothing crossing the bus. The fitting loop
-//! ([`super::fit`]) runs it at every step; [`GpuScene`] runs it to draw a decoded scene
+//! binned and rendered on the GPU with nothing crossing the bus. Stage 1's resident fit
+//! (`fit::resident`) runs it at every step; [`GpuScene`] runs it to draw a decoded scene
 //! again and again (what a viewer, or a frame-rate measurement, does).
 //!
 //! Kernels: `fit_range` (quantization-aware steps only), `fit_project`, `fit_scan`,
 //! `fit_emit`, the radix sort ([`super::sort`]), `fit_tiles`, then `render`.
 
+// Without the stages (feature `encode`) only `GpuScene` draws with this half; the
+// buffers and helpers the resident fit adds to it go unused.
+#![cfg_attr(not(feature = "encode"), allow(dead_code))]
+
 use super::sort::{RadixSort, SortPlan};
 use super::{too_big, Dispatch, Gpu, Kernel};
-use crate::format::{Error, ErrorKind, Limits, Result};
+use super::{Error, ErrorKind, Result};
+use crate::format::Limits;
 use crate::model::Blend;
 use crate::model::{CovParam, GaussianSet, Scene};
 use crate::render::{RgbImage, TILE};
@@ -45,6 +50,19 @@ impl ForwardKernels {
         }
     }
 
+    /// The kernels, built the first time in an error scope: a compiler that refuses a
+    /// shader gives an error (and the caller the CPU), and nothing is cached, so a later
+    /// call tries again rather than finding a broken pipeline.
+    pub(crate) fn ensure(gpu: &Gpu) -> Result<&ForwardKernels> {
+        if let Some(k) = gpu.forward.get() {
+            return Ok(k);
+        }
+        let built = gpu.checked(|| Ok(ForwardKernels::new(&gpu.device)))?;
+        Ok(gpu.forward.get_or_init(|| built))
+    }
+
+    /// The kernels, once [`ForwardKernels::ensure`] has built them (every user holds a
+    /// [`Forward`], whose constructor does).
     pub(crate) fn of(gpu: &Gpu) -> &ForwardKernels {
         gpu.forward.get_or_init(|| ForwardKernels::new(&gpu.device))
     }
@@ -154,7 +172,7 @@ impl Forward {
             return Err(too_big(&gpu.info, "a dispatch over the tiles of this size"));
         }
         let device = &gpu.device;
-        let k = ForwardKernels::of(gpu);
+        let k = ForwardKernels::ensure(gpu)?;
         let fit = gpu.uniform_buffer(bytemuck::bytes_of(uniform));
         let params = gpu.storage(bytemuck::cast_slice(params));
         let ranges = gpu.zeroed(STRIDE as u64 * 8);
@@ -417,19 +435,15 @@ impl<'g> GpuScene<'g> {
     pub fn draw(&self, frames: u32) -> Result<()> {
         self.gpu.checked(|| {
             for _ in 0..frames {
-                self.gpu.queue.submit([self.frame().finish()]);
+                self.gpu.submit([self.frame().finish()]);
             }
             Ok(())
         })
     }
 
-    /// Wait until every queued draw has finished.
+    /// Wait until every queued draw has finished, at most [`Gpu::set_wait_timeout`].
     pub fn wait(&self) -> Result<()> {
-        self.gpu
-            .device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map(|_| ())
-            .map_err(|e| Error::new(ErrorKind::Io, format!("GPU: {e}")))
+        self.gpu.wait()
     }
 
     /// Draw once more and read the image back.

@@ -1,18 +1,20 @@
-//! Rendering and fitting on a GPU, with wgpu compute shaders (`shaders/`).
+//! The GPU device layer, with wgpu compute shaders (`shaders/`): the device, kernels and
+//! buffers every GPU user shares, the renderer, and the resident forward half. It knows
+//! no stage; each stage keeps its GPU twin beside its CPU code and asks this layer for its
+//! kernels ([`Gpu::kernels`]). Its error is [`Error`].
 //!
 //! - [`Gpu::render`] gives the pixels of [`crate::render`]: projection and tile binning
-//!   are the CPU's own ([`project_scene`]), and the shader evaluates spec §6 per pixel in
-//!   the same `f32` order, so the only difference is the rounding of `exp` (within 1/255
-//!   after 8-bit conversion; `tests/gpu.rs` holds it to that).
+//!   are the CPU's own ([`project_scene`], `render::tiles`), and the shader evaluates spec
+//!   §6 per pixel in the same `f32` order, so the only difference is the rounding of `exp`
+//!   (within 1/255 after 8-bit conversion; `cli/tests/gpu.rs` holds it to that).
 //! - [`Gpu::backward`] gives the gradients `fit::raster::backward` gives, for both blend
 //!   modes, with no atomics: each tile writes one slot per list entry and the slots are
 //!   summed in a fixed order.
-//! - [`fit::ResidentFit`] is stage 1's whole optimizer step on the GPU (projection,
-//!   deterministic binning by a stable radix sort, render, L2 loss, backward, chain rule,
-//!   Adam), reading back only progress reports. [`crate::fit::Fitter::use_gpu`] uses it.
-//! - [`GpuScene`] draws a decoded scene again and again with that pipeline's forward half.
-//! - [`enhance::GpuMixture`] is stage 2's per-Gaussian work (the mixture's weights and
-//!   operators, forward and backward); [`crate::enhance::fit::Session::use_gpu`] uses it.
+//! - [`GpuScene`] draws a decoded scene again and again with the resident forward half
+//!   (projection, deterministic binning by a stable radix sort, render).
+//! - Stage 1's whole optimizer step on the GPU (`fit::resident`: that forward half, then
+//!   L2 loss, backward, chain rule, Adam) and stage 2's per-Gaussian mixture
+//!   (`enhance::gpu`) live beside their stages.
 //!
 //! The adapter is headless (no surface) and honours wgpu's environment variables:
 //! `WGPU_BACKEND` (e.g. `vulkan`), `WGPU_ADAPTER_NAME` (a substring of the adapter's
@@ -21,7 +23,7 @@
 //! pipelines keep whole images and refuse, with [`ErrorKind::LimitExceeded`], what does
 //! not fit (the fitter then continues on the CPU).
 
-use crate::format::{Error, ErrorKind, Limits, Result};
+use crate::format::Limits;
 use crate::model::{Blend, Scene};
 use crate::render::{project_scene, Projected, RgbImage, TileLists, TILE};
 use wgpu::util::DeviceExt;
@@ -35,7 +37,13 @@ macro_rules! shader {
         ))),+])
     };
 }
+#[cfg_attr(not(feature = "encode"), allow(unused_imports))]
 pub(crate) use shader;
+
+/// How long a call waits for the GPU by default: far above any step or frame this crate
+/// submits on a working device (a whole 12-MP render is well under a second), short of
+/// leaving a hung one to block a program forever.
+pub const DEFAULT_WAIT_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(60);
 
 /// u32 words per Gaussian in stage 2's `gauss` buffer (`GAUSS` of the shaders' prelude).
 pub(crate) const GAUSS: usize = 12;
@@ -89,25 +97,33 @@ pub(crate) fn with_contract(parts: &[&str]) -> String {
     for part in parts {
         source.push_str(part);
     }
+    #[cfg(test)]
+    if BREAK_SHADERS.with(std::cell::Cell::get) {
+        // What a stricter compiler than lavapipe's would refuse, made certain.
+        source.push_str("\nfn refused_by_every_compiler( {\n");
+    }
     source
 }
 
+#[cfg(test)]
+thread_local! {
+    static BREAK_SHADERS: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Make every shader built on this thread fail to compile (or stop doing so), to test the
+/// paths a real driver's refusal takes.
+#[cfg(test)]
+pub(crate) fn break_shaders_on_this_thread(on: bool) {
+    BREAK_SHADERS.with(|b| b.set(on));
+}
+
+mod error;
 pub(crate) mod forward;
 mod sort;
 
+pub use error::{Error, ErrorKind, Result};
+
 pub use forward::GpuScene;
-
-/// Why no GPU can be used.
-#[derive(Debug)]
-pub struct GpuError(String);
-
-impl std::fmt::Display for GpuError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&self.0)
-    }
-}
-
-impl std::error::Error for GpuError {}
 
 /// Floats per tile-list entry written by the backward passes: d mean (2), d conic (3),
 /// d opacity, d colour (3).
@@ -127,8 +143,30 @@ pub struct Gpu {
     pub(crate) max_groups: u32,
     /// The resident forward half's pipelines, built when first needed.
     forward: std::sync::OnceLock<forward::ForwardKernels>,
+    /// Submissions and read-backs so far ([`Gpu::traffic`]).
+    traffic: TrafficCounters,
+    /// See [`Gpu::set_wait_timeout`].
+    wait_timeout: std::sync::Mutex<std::time::Duration>,
+    /// Errors wgpu raised outside every error scope; the next checked call reports them.
+    uncaptured: std::sync::Arc<std::sync::Mutex<Option<String>>>,
     /// The stages' kernel sets, built on first use, one per type ([`Gpu::kernels`]).
+    #[cfg_attr(not(feature = "encode"), allow(dead_code))]
     kernels: std::sync::Mutex<Vec<std::sync::Arc<dyn std::any::Any + Send + Sync>>>,
+}
+
+/// Host round trips of a device ([`Gpu::traffic`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Traffic {
+    /// Command submissions.
+    pub submissions: u64,
+    /// Blocking read-backs (each waits for the device and maps a result).
+    pub read_backs: u64,
+}
+
+#[derive(Debug, Default)]
+struct TrafficCounters {
+    submissions: std::sync::atomic::AtomicU64,
+    read_backs: std::sync::atomic::AtomicU64,
 }
 
 /// Uniform block of the shader (`Params` in `render.wgsl`).
@@ -148,23 +186,34 @@ impl Gpu {
     /// Open the adapter the environment asks for (or the default one), software
     /// rasterizers such as lavapipe included, and build the pipeline. Fails, without
     /// panicking, when there is no usable adapter.
-    pub fn new() -> std::result::Result<Gpu, GpuError> {
+    pub fn new() -> Result<Gpu> {
         Self::open(true)
     }
 
     /// [`Gpu::new`], refusing an adapter that is itself a CPU rasterizer: what
     /// `--device auto` wants, since the CPU renderer beats an emulated GPU.
-    pub fn new_hardware() -> std::result::Result<Gpu, GpuError> {
+    pub fn new_hardware() -> Result<Gpu> {
         Self::open(false)
     }
 
-    fn open(allow_software: bool) -> std::result::Result<Gpu, GpuError> {
-        let instance =
-            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
-        let adapter = pollster::block_on(pick_adapter(&instance))?;
+    fn open(allow_software: bool) -> Result<Gpu> {
+        let mut found = Err(Error::new(ErrorKind::Unavailable, "no GPU adapter"));
+        for backends in backend_order(wgpu::Backends::from_env()) {
+            let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+            desc.backends = backends;
+            let instance = wgpu::Instance::new(desc);
+            found = pollster::block_on(pick_adapter(&instance, backends));
+            if found.is_ok() {
+                break;
+            }
+        }
+        let adapter = found?;
         let info = adapter.get_info();
         if !allow_software && info.device_type == wgpu::DeviceType::Cpu {
-            return Err(GpuError(format!("only a software adapter ({})", info.name)));
+            return Err(Error::new(
+                ErrorKind::Unavailable,
+                format!("only a software adapter ({})", info.name),
+            ));
         }
         let limits = adapter.limits();
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
@@ -172,25 +221,38 @@ impl Gpu {
             required_limits: limits.clone(),
             ..Default::default()
         }))
-        .map_err(|e| GpuError(format!("{}: {e}", info.name)))?;
-        let render = Kernel::new(&device, "render", &shader!("render"), 4, 1);
-        let backward_sum = Kernel::new(
-            &device,
-            "backward_sum",
-            &shader!("backward_bindings", "backward_sum"),
-            5,
-            1,
-        );
-        let backward_alpha = Kernel::new(
-            &device,
-            "backward_alpha",
-            &shader!("backward_bindings", "backward_alpha"),
-            5,
-            1,
-        );
-        let max_binding = limits
-            .max_storage_buffer_binding_size
-            .min(limits.max_buffer_size);
+        .map_err(|e| Error::new(ErrorKind::Unavailable, format!("{}: {e}", info.name)))?;
+        // wgpu's default for an error outside every scope is to panic; this crate scopes
+        // every call, and keeps whatever escapes for the next call to report.
+        let uncaptured = std::sync::Arc::new(std::sync::Mutex::new(None));
+        let sink = uncaptured.clone();
+        device.on_uncaptured_error(std::sync::Arc::new(move |e: wgpu::Error| {
+            let mut last = sink.lock().unwrap_or_else(|e| e.into_inner());
+            last.get_or_insert_with(|| e.to_string());
+        }));
+        // Real shader compilers refuse what lavapipe accepts: a kernel that does not build
+        // makes the device unusable here, as an error (the caller then uses the CPU).
+        let (render, backward_sum, backward_alpha) = scoped(&device, || {
+            Ok((
+                Kernel::new(&device, "render", &shader!("render"), 4, 1),
+                Kernel::new(
+                    &device,
+                    "backward_sum",
+                    &shader!("backward_bindings", "backward_sum"),
+                    5,
+                    1,
+                ),
+                Kernel::new(
+                    &device,
+                    "backward_alpha",
+                    &shader!("backward_bindings", "backward_alpha"),
+                    5,
+                    1,
+                ),
+            ))
+        })
+        .map_err(|e| Error::new(ErrorKind::Unavailable, format!("{}: {e}", info.name)))?;
+        let max_binding = max_binding(&limits);
         Ok(Gpu {
             device,
             queue,
@@ -201,8 +263,52 @@ impl Gpu {
             max_binding,
             max_groups: limits.max_compute_workgroups_per_dimension,
             forward: std::sync::OnceLock::new(),
+            wait_timeout: std::sync::Mutex::new(DEFAULT_WAIT_TIMEOUT),
+            traffic: TrafficCounters::default(),
+            uncaptured,
             kernels: std::sync::Mutex::new(Vec::new()),
         })
+    }
+
+    /// Submit command buffers, counted in [`Gpu::traffic`].
+    pub(crate) fn submit<I: IntoIterator<Item = wgpu::CommandBuffer>>(&self, buffers: I) {
+        self.traffic
+            .submissions
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        self.queue.submit(buffers);
+    }
+
+    /// How many submissions and blocking read-backs this device has made: the host round
+    /// trips that bound a fast GPU's step time (a read-back is also a submission).
+    pub fn traffic(&self) -> Traffic {
+        let get = |c: &std::sync::atomic::AtomicU64| c.load(std::sync::atomic::Ordering::Relaxed);
+        Traffic {
+            submissions: get(&self.traffic.submissions),
+            read_backs: get(&self.traffic.read_backs),
+        }
+    }
+
+    /// Wait for the work submitted so far, at most the wait timeout: a hung or lost device
+    /// gives [`ErrorKind::TimedOut`] (and the caller the CPU) instead of blocking forever.
+    pub(crate) fn wait(&self) -> Result<()> {
+        let timeout = *self.wait_timeout.lock().unwrap_or_else(|e| e.into_inner());
+        match self.device.poll(wgpu::PollType::Wait {
+            submission_index: None,
+            timeout: Some(timeout),
+        }) {
+            Ok(_) => Ok(()),
+            Err(wgpu::PollError::Timeout) => Err(Error::new(
+                ErrorKind::TimedOut,
+                format!("GPU: no answer from {} within {timeout:?}", self.info.name),
+            )),
+            Err(e) => Err(Error::new(ErrorKind::Device, format!("GPU: {e}"))),
+        }
+    }
+
+    /// The longest wait for the GPU to finish submitted work (default
+    /// [`DEFAULT_WAIT_TIMEOUT`]); past it the call fails with [`ErrorKind::TimedOut`].
+    pub fn set_wait_timeout(&self, timeout: std::time::Duration) {
+        *self.wait_timeout.lock().unwrap_or_else(|e| e.into_inner()) = timeout;
     }
 
     /// Pretend the adapter binds at most `bytes` per buffer (never raises the real
@@ -476,7 +582,10 @@ impl Gpu {
             enc.copy_buffer_to_buffer(b, 0, &s, 0, b.size());
             s
         });
-        self.queue.submit([enc.finish()]);
+        self.submit([enc.finish()]);
+        self.traffic
+            .read_backs
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         let (tx, rx) = std::sync::mpsc::channel();
         for s in &staging {
             let tx = tx.clone();
@@ -485,12 +594,10 @@ impl Gpu {
             });
         }
         drop(tx);
-        self.device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| Error::new(ErrorKind::Io, format!("GPU: {e}")))?;
+        self.wait()?;
         if !rx.iter().all(|r| r.is_ok()) {
             return Err(Error::new(
-                ErrorKind::Io,
+                ErrorKind::Device,
                 "GPU: reading the result back failed",
             ));
         }
@@ -499,7 +606,7 @@ impl Gpu {
             let view = s
                 .slice(..)
                 .get_mapped_range()
-                .map_err(|e| Error::new(ErrorKind::Io, format!("GPU: {e}")))?;
+                .map_err(|e| Error::new(ErrorKind::Device, format!("GPU: {e}")))?;
             out.push(view.to_vec());
             drop(view);
             s.unmap();
@@ -523,30 +630,16 @@ impl Gpu {
     /// [`Error`], where wgpu's default is to panic. Every public entry point that
     /// creates GPU resources or records work goes through here.
     pub(crate) fn checked<T>(&self, f: impl FnOnce() -> Result<T>) -> Result<T> {
-        let memory = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
-        let validation = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let out = f();
-        let invalid = pollster::block_on(validation.pop());
-        if let Some(e) = pollster::block_on(memory.pop()).or(invalid) {
-            let kind = match e {
-                wgpu::Error::OutOfMemory { .. } => ErrorKind::LimitExceeded,
-                _ => ErrorKind::Io,
-            };
-            // The description, not `Display`, which for validation says only that; on
-            // one line.
-            let what = match &e {
-                wgpu::Error::Validation { description, .. } => description.clone(),
-                other => other.to_string(),
-            };
-            let what = what
-                .lines()
-                .map(str::trim)
-                .filter(|l| !l.is_empty() && *l != "Caused by:")
-                .collect::<Vec<_>>()
-                .join(": ");
-            return Err(Error::new(kind, format!("GPU: {what}")));
+        let out = scoped(&self.device, f);
+        let escaped = self
+            .uncaptured
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .take();
+        match escaped {
+            Some(e) if out.is_ok() => Err(Error::new(ErrorKind::Device, format!("GPU: {e}"))),
+            _ => out,
         }
-        out
     }
 
     /// Record into `enc` one compute pass running `dispatches` in order (wgpu orders
@@ -585,18 +678,20 @@ impl Gpu {
     /// The kernel set of type `T`, built by `make` the first time it is asked for on this
     /// device. Each stage keeps its kernels beside its code and asks for them here, so
     /// that this device layer knows no stage.
+    #[cfg_attr(not(feature = "encode"), allow(dead_code))]
     pub(crate) fn kernels<T: std::any::Any + Send + Sync>(
         &self,
         make: impl FnOnce(&wgpu::Device) -> T,
-    ) -> std::sync::Arc<T> {
-        // A panic while building cannot leave a half-made entry: entries are pushed whole.
+    ) -> Result<std::sync::Arc<T>> {
         let mut cache = self.kernels.lock().unwrap_or_else(|e| e.into_inner());
         if let Some(k) = cache.iter().find_map(|k| k.clone().downcast::<T>().ok()) {
-            return k;
+            return Ok(k);
         }
-        let k = std::sync::Arc::new(make(&self.device));
+        // Built in an error scope, and cached only when it built: a refused shader is an
+        // error now and a fresh try next time, never a broken pipeline kept for good.
+        let k = std::sync::Arc::new(scoped(&self.device, || Ok(make(&self.device)))?);
         cache.push(k.clone());
-        k
+        Ok(k)
     }
 }
 
@@ -752,22 +847,79 @@ fn upload_layout(proj: &[Projected]) -> (Vec<[f32; 4]>, Vec<[u32; 4]>) {
     (g, b)
 }
 
+/// Run `f` inside out-of-memory and validation error scopes of `device`: what wgpu raises
+/// there becomes an [`Error`] (its default for an unscoped error is to panic).
+fn scoped<T>(device: &wgpu::Device, f: impl FnOnce() -> Result<T>) -> Result<T> {
+    let memory = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+    let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
+    let out = f();
+    let invalid = pollster::block_on(validation.pop());
+    if let Some(e) = pollster::block_on(memory.pop()).or(invalid) {
+        let kind = match e {
+            wgpu::Error::OutOfMemory { .. } => ErrorKind::LimitExceeded,
+            _ => ErrorKind::Device,
+        };
+        // The description, not `Display`, which for validation says only that; on one line.
+        let what = match &e {
+            wgpu::Error::Validation { description, .. } => description.clone(),
+            other => other.to_string(),
+        };
+        let what = what
+            .lines()
+            .map(str::trim)
+            .filter(|l| !l.is_empty() && *l != "Caused by:")
+            .collect::<Vec<_>>()
+            .join(": ");
+        return Err(Error::new(kind, format!("GPU: {what}")));
+    }
+    out
+}
+
+/// The largest storage binding to plan buffers against. Metal reports the whole buffer
+/// limit here (over 16 GiB on large Macs), while every offset and length this crate binds
+/// and every shader index is a `u32`: capped there, an oversized job is refused as
+/// [`ErrorKind::LimitExceeded`] rather than overflowing the sort's arithmetic.
+fn max_binding(limits: &wgpu::Limits) -> u64 {
+    limits
+        .max_storage_buffer_binding_size
+        .min(limits.max_buffer_size)
+        .min(u64::from(u32::MAX))
+}
+
+/// The backends to try, in order. `WGPU_BACKEND` when set. Otherwise all of them, except
+/// on Windows, where Vulkan is tried first: wgpu compiles WGSL for DX12 with FXC unless
+/// built with `static-dxc` (which this crate does not ship, to keep its build lean), and
+/// FXC is slow on the loops of these kernels and has its own barrier rules
+/// (`backward_alpha.wgsl` has barriers in a loop whose bound is read from a buffer).
+fn backend_order(from_env: Option<wgpu::Backends>) -> Vec<wgpu::Backends> {
+    match from_env {
+        Some(b) => vec![b],
+        None if cfg!(windows) => vec![wgpu::Backends::VULKAN, wgpu::Backends::all()],
+        None => vec![wgpu::Backends::all()],
+    }
+}
+
 /// `WGPU_ADAPTER_NAME` when set (a case-insensitive substring of the name), else the
-/// adapter wgpu prefers (`WGPU_POWER_PREF`, high performance by default).
-async fn pick_adapter(instance: &wgpu::Instance) -> std::result::Result<wgpu::Adapter, GpuError> {
+/// adapter wgpu prefers (`WGPU_POWER_PREF`, high performance by default), on `backends`.
+async fn pick_adapter(
+    instance: &wgpu::Instance,
+    backends: wgpu::Backends,
+) -> Result<wgpu::Adapter> {
     if let Ok(want) = std::env::var("WGPU_ADAPTER_NAME") {
         let want = want.to_lowercase();
-        let backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all());
         let adapters = instance.enumerate_adapters(backends).await;
         let names: Vec<String> = adapters.iter().map(|a| a.get_info().name).collect();
         return adapters
             .into_iter()
             .find(|a| a.get_info().name.to_lowercase().contains(&want))
             .ok_or_else(|| {
-                GpuError(format!(
-                    "no adapter named like {want:?} (found: {})",
-                    names.join(", ")
-                ))
+                Error::new(
+                    ErrorKind::Unavailable,
+                    format!(
+                        "no adapter named like {want:?} (found: {})",
+                        names.join(", ")
+                    ),
+                )
             });
     }
     instance
@@ -779,11 +931,155 @@ async fn pick_adapter(instance: &wgpu::Instance) -> std::result::Result<wgpu::Ad
             ..Default::default()
         })
         .await
-        .map_err(|e| GpuError(format!("no GPU adapter: {e}")))
+        .map_err(|e| Error::new(ErrorKind::Unavailable, format!("no GPU adapter: {e}")))
 }
+
+/// Byte size and member offsets (by name) of the one uniform block of a WGSL module, as
+/// naga lays it out: what the host's `#[repr(C)]` twin must match.
+#[cfg(test)]
+pub(crate) fn uniform_layout(source: &str) -> (u32, Vec<(String, u32)>) {
+    use wgpu::naga;
+    let module = naga::front::wgsl::parse_str(source).expect("the WGSL parses");
+    let mut uniforms = module
+        .global_variables
+        .iter()
+        .filter(|(_, v)| v.space == naga::AddressSpace::Uniform);
+    let (_, var) = uniforms.next().expect("a uniform block");
+    assert!(uniforms.next().is_none(), "one uniform block");
+    match &module.types[var.ty].inner {
+        naga::TypeInner::Struct { members, span } => (
+            *span,
+            members
+                .iter()
+                .map(|m| (m.name.clone().unwrap_or_default(), m.offset))
+                .collect(),
+        ),
+        other => panic!("the uniform is not a struct: {other:?}"),
+    }
+}
+
+/// Check a `#[repr(C)]` host struct against the uniform block of a WGSL module: the same
+/// size, and each listed field at the offset of the WGSL member of that name (or of the
+/// name given after `=`, where an array on the host is split into members in WGSL).
+#[cfg(test)]
+macro_rules! assert_uniform_matches {
+    ($ty:ty, $source:expr, [$($field:ident $(= $wgsl:literal)?),* $(,)?]) => {{
+        let (span, members) = $crate::gpu::uniform_layout(&$source);
+        assert_eq!(span as usize, std::mem::size_of::<$ty>(), "size of {}", stringify!($ty));
+        $(
+            let name = [stringify!($field) $(, $wgsl)?];
+            let name = name[name.len() - 1];
+            let wgsl = members
+                .iter()
+                .find(|(n, _)| n == name)
+                .unwrap_or_else(|| panic!("no WGSL member {name}"));
+            assert_eq!(
+                wgsl.1 as usize,
+                std::mem::offset_of!($ty, $field),
+                "offset of {}.{}", stringify!($ty), stringify!($field)
+            );
+        )*
+    }};
+}
+#[cfg(test)]
+pub(crate) use assert_uniform_matches;
 
 #[cfg(test)]
 pub(crate) mod tests {
+    /// The host's uniform structs have their WGSL blocks' layouts (no device needed).
+    #[test]
+    fn uniform_structs_match_their_wgsl_layouts() {
+        use super::forward::FitUniform;
+        use super::Params;
+        assert_uniform_matches!(
+            Params,
+            shader!("render"),
+            [width, height, tiles_x, blend, tile_row0, rows]
+        );
+        assert_uniform_matches!(
+            FitUniform,
+            shader!("fit_common", "fit_adam"),
+            [
+                width,
+                height,
+                tiles_x,
+                tiles_y,
+                count,
+                capacity,
+                blend,
+                has_opacity,
+                qat,
+                bits = "bits_position",
+                lr = "lr_position",
+                c1,
+                c2,
+                beta1,
+                beta2,
+                eps,
+                cholesky
+            ]
+        );
+        // The backward passes and the sort take four `u32` as an array.
+        for source in [
+            shader!("backward_bindings", "backward_sum"),
+            shader!("sort_common", "sort_scan"),
+        ] {
+            assert_eq!(super::uniform_layout(&source).0 as usize, 16);
+        }
+    }
+
+    /// A kernel set that fails to build is an error and is not cached: the next request
+    /// builds it afresh.
+    #[test]
+    fn a_failed_kernel_build_is_not_cached() {
+        let Some(gpu) = gpu() else { return };
+        struct Probe(#[allow(dead_code)] super::Kernel);
+        let make =
+            |d: &wgpu::Device| Probe(super::Kernel::new(d, "probe", &shader!("render"), 4, 1));
+        super::break_shaders_on_this_thread(true);
+        let broken = gpu.kernels(make);
+        super::break_shaders_on_this_thread(false);
+        let e = broken
+            .err()
+            .expect("a shader that does not compile was accepted");
+        assert_eq!(e.kind(), super::ErrorKind::Device, "{e}");
+        assert!(gpu.kernels(make).is_ok());
+        // The device is still good for everything else.
+        assert!(gpu.checked(|| Ok(gpu.zeroed(64))).is_ok());
+    }
+
+    /// Metal reports the whole buffer limit as the storage-binding limit; the crate plans
+    /// with at most `u32::MAX`, so what does not fit is a limit, not an overflow.
+    #[test]
+    fn the_binding_limit_is_capped_at_u32() {
+        let huge = wgpu::Limits {
+            max_storage_buffer_binding_size: 1 << 36,
+            max_buffer_size: 1 << 37,
+            ..wgpu::Limits::default()
+        };
+        assert_eq!(super::max_binding(&huge), u64::from(u32::MAX));
+        let small = wgpu::Limits {
+            max_storage_buffer_binding_size: 1 << 27,
+            max_buffer_size: 1 << 26,
+            ..wgpu::Limits::default()
+        };
+        assert_eq!(super::max_binding(&small), 1 << 26);
+    }
+
+    /// `WGPU_BACKEND` decides when set; otherwise every backend, Vulkan first on Windows
+    /// (DX12 would compile the kernels with FXC).
+    #[test]
+    fn backends_are_tried_in_order() {
+        use wgpu::Backends;
+        assert_eq!(super::backend_order(Some(Backends::GL)), vec![Backends::GL]);
+        let default = super::backend_order(None);
+        if cfg!(windows) {
+            assert_eq!(default, vec![Backends::VULKAN, Backends::all()]);
+        } else {
+            assert_eq!(default, vec![Backends::all()]);
+        }
+    }
+
     /// A resource the adapter cannot make is an error, not a panic.
     #[test]
     fn wgpu_errors_become_errors() {

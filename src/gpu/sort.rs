@@ -10,7 +10,7 @@
 //! for the buffers' capacity and ignores the items past the count.
 
 use super::Kernel;
-use crate::format::{Error, ErrorKind, Result};
+use super::{Error, ErrorKind, Result};
 use wgpu::util::DeviceExt;
 
 /// Items per block, one workgroup's share (`SORT_BLOCK` of the shaders' prelude).
@@ -233,7 +233,7 @@ mod tests {
         let plan = SortPlan::new(gpu, sort, &kb, &vb, &cb, capacity, key_bits).unwrap();
         let mut enc = gpu.encoder();
         plan.record(sort, &mut enc);
-        gpu.queue.submit([enc.finish()]);
+        gpu.submit([enc.finish()]);
         let live = count.min(capacity) as usize;
         let mut want: Vec<(u32, u32)> = keys[..live].iter().copied().zip(values).collect();
         want.sort_by_key(|&(k, _)| k);

@@ -86,6 +86,7 @@ impl<'a> Rgb8<'a> {
 }
 
 /// Why a metric could not be computed. Every metric returns it rather than panicking.
+#[non_exhaustive]
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum MetricError {
     /// A side of an image is zero.

@@ -141,6 +141,7 @@ impl Bins {
 #[cfg(any(test, feature = "encode", feature = "gpu"))]
 #[derive(Debug, Default)]
 pub(crate) struct TileLists {
+    #[cfg_attr(not(feature = "encode"), allow(dead_code))]
     pub tiles_x: u32,
     offsets: Vec<usize>,
     items: Vec<u32>,

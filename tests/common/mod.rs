@@ -4,8 +4,12 @@
 use std::path::{Path, PathBuf};
 
 /// The repository's root: the library's folder, also for the tests of `cli/` that
-/// include this file.
+/// include this file; `GSI_REPO` where a test binary runs from another checkout (the GPU
+/// kit, `tools/gpu-kit.sh`, runs binaries built elsewhere).
 pub fn repo_root() -> PathBuf {
+    if let Some(root) = std::env::var_os("GSI_REPO") {
+        return PathBuf::from(root);
+    }
     let here = Path::new(env!("CARGO_MANIFEST_DIR"));
     if here.join("format-spec.md").exists() {
         here.to_path_buf()
@@ -55,5 +59,22 @@ impl Lcg {
         let u = 1.0 - self.next();
         let v = self.next();
         (-2.0 * u.ln()).sqrt() * (2.0 * std::f64::consts::PI * v).cos()
+    }
+}
+
+/// The `gsi` binary: `built` (the test's `CARGO_BIN_EXE_gsi`), or `GSI_BIN` where the test
+/// binary runs on another machine.
+pub fn gsi_exe(built: &str) -> PathBuf {
+    std::env::var_os("GSI_BIN").map_or_else(|| PathBuf::from(built), PathBuf::from)
+}
+
+/// A folder for a test's files: `built` (the test's `CARGO_TARGET_TMPDIR`), or the system's
+/// temporary folder where that does not exist (a test binary run on another machine).
+pub fn scratch_dir(built: &str) -> PathBuf {
+    let built = Path::new(built);
+    if built.is_dir() {
+        built.to_path_buf()
+    } else {
+        std::env::temp_dir()
     }
 }

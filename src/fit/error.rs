@@ -1,0 +1,41 @@
+//! Stage 1's error.
+
+use std::fmt;
+
+/// Why an encode failed. GPU failures are not among them: a fit given a GPU that fails
+/// finishes on the CPU and says so in [`super::Encoded::fallback`].
+#[non_exhaustive]
+#[derive(Debug)]
+pub enum Error {
+    /// The image to fit is unusable: empty, mis-sized, or holding non-finite values.
+    InvalidTarget(String),
+    /// The fit went non-finite (which the stability tests guard against).
+    NonFinite(&'static str),
+    /// Writing the file, or reading back what was written, failed in the container layer.
+    Format(crate::format::Error),
+}
+
+impl fmt::Display for Error {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Error::InvalidTarget(why) => write!(f, "cannot fit this image: {why}"),
+            Error::NonFinite(what) => f.write_str(what),
+            Error::Format(e) => e.fmt(f),
+        }
+    }
+}
+
+impl std::error::Error for Error {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        match self {
+            Error::Format(e) => Some(e),
+            _ => None,
+        }
+    }
+}
+
+impl From<crate::format::Error> for Error {
+    fn from(e: crate::format::Error) -> Error {
+        Error::Format(e)
+    }
+}
