@@ -145,6 +145,7 @@ impl AdamRule {
 
     /// The bias corrections `(1 − β1^t, 1 − β2^t)`, for a twin of [`AdamRule::update`]
     /// that runs elsewhere (`shaders/fit_adam.wgsl`).
+    #[cfg_attr(not(feature = "gpu"), allow(dead_code))]
     pub(crate) fn corrections(&self) -> (f32, f32) {
         (self.c1, self.c2)
     }

@@ -12,7 +12,7 @@
 # margins (gradient relative errors, parameter differences against their bounds, pixel
 # flips, round trips per step), then the benchmark (`GPU_BENCH_ARGS`, by default
 # `--limit 4` images for the time-to-32 dB sweep, to stay well inside ten minutes), and
-# leaves the logs and bench/gpu.json in $OUT.
+# leaves the logs and gpu.json in $OUT (target/gpukit/ outside the device tool).
 #
 #   sh tools/gpu-kit.sh --dry-run
 #
@@ -23,7 +23,7 @@ cd "$(dirname "$0")/.."
 kit=.gpukit
 
 run_kit() {
-    out="${OUT:-bench/gpukit}"
+    out="${OUT:-target/gpukit}"
     mkdir -p "$out"
     export GSI_REQUIRE_GPU=1 GSI_REPO="$PWD" GSI_BIN="$PWD/$kit/gsi"
     export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-$(mktemp -d)}"
@@ -36,6 +36,8 @@ run_kit() {
         # shellcheck disable=SC2086
         if ! "$kit/$t" $filter --test-threads=1 --nocapture >"$out/$t.log" 2>&1; then
             status=1
+            echo "FAILED: $t (last lines of $out/$t.log follow)"
+            tail -n 20 "$out/$t.log"
         fi
         grep -E '^test result|FAILED|panicked' "$out/$t.log" || true
     done
@@ -76,7 +78,7 @@ cargo build --release --bin gsi -p gsi-cli
 cp target/release/examples/gpu_bench target/release/gsi "$kit/"
 # The test binaries, as cargo names them in its JSON messages.
 exe_of() {
-    grep '"executable":"/' | sed 's/.*"executable":"\([^"]*\)".*/\1/' | head -n 1
+    grep -E '"profile":\{[^}]*"test":true' | grep '"executable":"/' | sed 's/.*"executable":"\([^"]*\)".*/\1/' | head -n 1
 }
 cp "$(cargo test --release --no-run -p gsi-cli --test gpu --message-format=json 2>/dev/null | exe_of)" "$kit/tests-gpu"
 cp "$(cargo test --release --no-run -p gsi --lib --features encode,gpu --message-format=json 2>/dev/null | exe_of)" "$kit/tests-lib"

@@ -1,7 +1,9 @@
 //! Bytes to pixels: the first two bytes choose an output size of 1..=64 × 1..=64, the
 //! rest is a file. Whatever the file holds, a render that the limits allow succeeds and
 //! gives finite values, and (for small enough scenes) the tiled renderer agrees bit for
-//! bit with a plain per-pixel loop written from `format-spec.md` §6.3-6.4.
+//! bit with a plain per-pixel loop written from `format-spec.md` §6.3-6.4. The 8-bit
+//! outputs rendered straight into a caller's buffer (RGB and RGBA, as `gsi::Reader` and
+//! `gsi decode` use them) equal the float image converted afterwards.
 
 #![no_main]
 
@@ -32,7 +34,20 @@ fuzz_target!(|data: &[u8]| {
     if let Some((k, v)) = image.data.iter().enumerate().find(|(_, v)| !v.is_finite()) {
         panic!("pixel {} channel {} is {v}", k / 3, k % 3);
     }
-    assert_eq!(image.to_rgb8().len(), image.data.len());
+    let rgb8 = image.to_rgb8();
+    assert_eq!(rgb8.len(), image.data.len());
+    let mut direct = vec![0u8; rgb8.len()];
+    gsi::render::render_rgb8_into(&scene, width, height, &mut direct).expect("8-bit render");
+    assert!(
+        direct == rgb8,
+        "8-bit render differs from the float one converted"
+    );
+    let mut rgba = vec![0u8; (width * height * 4) as usize];
+    gsi::render::render_rgba8_into(&scene, width, height, &mut rgba).expect("RGBA render");
+    assert!(
+        rgba == image.to_rgba8(),
+        "RGBA render differs from the float one converted"
+    );
 
     if scene
         .gaussians
