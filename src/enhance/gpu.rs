@@ -84,6 +84,10 @@ struct MixUniform {
     _pad: [u32; 4],
 }
 
+// The size of `Mix` in `enhance_common.wgsl`, checked at compile time here and against the
+// WGSL itself by `mix_uniform_matches_its_wgsl_layout`.
+const _: () = assert!(std::mem::size_of::<MixUniform>() == 48);
+
 /// The mixture of one enhancement fit, resident on the GPU: the Gaussians' taps and
 /// colours, uploaded once, and the buffers every iteration reuses.
 pub struct GpuMixture<'g> {

@@ -92,6 +92,10 @@ pub(crate) struct FitUniform {
     pub cholesky: u32,
 }
 
+// The size of `Fit` in `fit_common.wgsl`, checked at compile time here and against the WGSL
+// itself by `gpu::tests::uniform_structs_match_their_wgsl_layouts`.
+const _: () = assert!(std::mem::size_of::<FitUniform>() == 96);
+
 impl FitUniform {
     /// `count` Gaussians drawn at `width × height`; no step taken yet.
     pub(crate) fn new(

@@ -182,6 +182,10 @@ struct Params {
     _pad: [u32; 2],
 }
 
+// The size of `Params` in `render.wgsl`, checked at compile time here and against the WGSL
+// itself by `uniform_structs_match_their_wgsl_layouts`.
+const _: () = assert!(std::mem::size_of::<Params>() == 32);
+
 impl Gpu {
     /// Open the adapter the environment asks for (or the default one), software
     /// rasterizers such as lavapipe included, and build the pipeline. Fails, without
