@@ -26,6 +26,15 @@ fn gpu() -> Option<Gpu> {
     }
 }
 
+/// A target with detail at several scales, `w × h`: the render of 300 random Gaussians
+/// (returned too), clamped to the displayable range.
+fn fit_target(seed: u64, w: u32, h: u32) -> (gsi::Scene, gsi::RgbImage) {
+    let source = random_scene(seed, SceneSpec::new(w, h, 300, Blend::Sum));
+    let mut target = gsi::render::render(&source, w, h).unwrap();
+    target.data.iter_mut().for_each(|v| *v = v.clamp(0.0, 1.0));
+    (source, target)
+}
+
 /// Largest difference of the 8-bit outputs.
 fn max_diff(a: &gsi::render::RgbImage, b: &gsi::render::RgbImage) -> u8 {
     a.to_rgb8()
@@ -355,19 +364,11 @@ fn a_gpu_fit_matches_a_cpu_fit() {
 /// which any conforming GPU meets; lavapipe's actual differences are far smaller (printed).
 #[test]
 fn resident_steps_follow_the_cpu_steps() {
-    use gsi::fit::{default_bits, Fitter, Init, LearningRates, Loss};
+    use gsi::fit::{default_bits, Fitter, Init, Loss};
     let Some(gpu) = gpu() else { return };
     let (w, h) = (83, 61);
-    let source = random_scene(31, SceneSpec::new(w, h, 300, Blend::Sum));
-    let mut target = gsi::render::render(&source, w, h).unwrap();
-    target.data.iter_mut().for_each(|v| *v = v.clamp(0.0, 1.0));
-    let lr = LearningRates {
-        position: 2e-4,
-        log_scale: 0.01,
-        rotation: 0.01,
-        color: 0.005,
-        opacity: 0.01,
-    };
+    let (_, target) = fit_target(31, w, h);
+    let lr = gsi::fit::EncodeOptions::default().lr;
     for blend in [Blend::Sum, Blend::Alpha] {
         let bits = default_bits(w, h, blend);
         let mut cpu = Fitter::new(&target, 200, Init::Adaptive, blend, Loss::L2, 3);
@@ -596,19 +597,10 @@ fn a_wait_past_its_timeout_is_an_error() {
 #[test]
 fn round_trips_per_step_and_per_iteration() {
     use gsi::enhance::{features::FeatureBank, fit::EnhanceOptions, fit::Session};
-    use gsi::fit::{Fitter, Init, LearningRates, Loss};
+    use gsi::fit::{Fitter, Init, Loss};
     let Some(gpu) = gpu() else { return };
-    let (w, h) = (80, 60);
-    let source = random_scene(41, SceneSpec::new(w, h, 300, Blend::Sum));
-    let mut target = gsi::render::render(&source, w, h).unwrap();
-    target.data.iter_mut().for_each(|v| *v = v.clamp(0.0, 1.0));
-    let lr = LearningRates {
-        position: 2e-4,
-        log_scale: 0.01,
-        rotation: 0.01,
-        color: 0.005,
-        opacity: 0.01,
-    };
+    let (source, target) = fit_target(41, 80, 60);
+    let lr = gsi::fit::EncodeOptions::default().lr;
     let mut fitter = Fitter::new(&target, 150, Init::Adaptive, Blend::Sum, Loss::L2, 1);
     fitter.use_gpu(&gpu);
     fitter.step(&lr, None, false); // uploads and sizes the lists
@@ -630,12 +622,11 @@ fn round_trips_per_step_and_per_iteration() {
         fitter.step(&lr, None, true).unwrap();
     });
     assert_eq!(fitter.fallback(), None);
-    let scene = source.clone();
     let opts = EnhanceOptions {
         iterations: 10,
         ..EnhanceOptions::default()
     };
-    let mut session = Session::new(&scene, &opts, &FeatureBank);
+    let mut session = Session::new(&source, &opts, &FeatureBank);
     session.use_gpu(&gpu).unwrap();
     session.step();
     let enhance = per(&mut || {
