@@ -145,6 +145,8 @@ pub struct Gpu {
     forward: std::sync::OnceLock<forward::ForwardKernels>,
     /// Submissions and read-backs so far ([`Gpu::traffic`]).
     traffic: TrafficCounters,
+    /// Staging buffers of earlier read-backs, for the next ones to reuse.
+    staging: std::sync::Mutex<Vec<wgpu::Buffer>>,
     /// See [`Gpu::set_wait_timeout`].
     wait_timeout: std::sync::Mutex<std::time::Duration>,
     /// Errors wgpu raised outside every error scope; the next checked call reports them.
@@ -161,13 +163,21 @@ pub struct Traffic {
     pub submissions: u64,
     /// Blocking read-backs (each waits for the device and maps a result).
     pub read_backs: u64,
+    /// Staging buffers created for read-backs (reused from a ring after the first).
+    pub staging_buffers: u64,
 }
 
 #[derive(Debug, Default)]
 struct TrafficCounters {
     submissions: std::sync::atomic::AtomicU64,
     read_backs: std::sync::atomic::AtomicU64,
+    staging_buffers: std::sync::atomic::AtomicU64,
 }
+
+/// Most staging buffers kept for reuse: the largest read-back takes three at once.
+const STAGING_RING: usize = 8;
+/// Largest staging buffer kept for reuse (bytes): the ring holds at most 128 MiB.
+const STAGING_KEEP_MAX: u64 = 16 << 20;
 
 /// Uniform block of the shader (`Params` in `render.wgsl`).
 #[repr(C)]
@@ -269,6 +279,7 @@ impl Gpu {
             forward: std::sync::OnceLock::new(),
             wait_timeout: std::sync::Mutex::new(DEFAULT_WAIT_TIMEOUT),
             traffic: TrafficCounters::default(),
+            staging: std::sync::Mutex::new(Vec::new()),
             uncaptured,
             kernels: std::sync::Mutex::new(Vec::new()),
         })
@@ -289,6 +300,7 @@ impl Gpu {
         Traffic {
             submissions: get(&self.traffic.submissions),
             read_backs: get(&self.traffic.read_backs),
+            staging_buffers: get(&self.traffic.staging_buffers),
         }
     }
 
@@ -569,20 +581,46 @@ impl Gpu {
         })
     }
 
+    /// A mappable buffer of at least `size` bytes: the smallest such one of the ring, or a
+    /// new one (of the next power of two, so that the ring serves the sizes around it).
+    /// Each fits the adapter, since the source it copies does.
+    fn staging_buffer(&self, size: u64) -> wgpu::Buffer {
+        let mut ring = self.staging.lock().unwrap_or_else(|e| e.into_inner());
+        let best = (0..ring.len())
+            .filter(|&k| ring[k].size() >= size)
+            .min_by_key(|&k| ring[k].size());
+        if let Some(k) = best {
+            return ring.swap_remove(k);
+        }
+        drop(ring);
+        self.traffic
+            .staging_buffers
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        // Small ones (progress reports, gradients of small fits) are rounded up for the
+        // ring to serve nearby sizes; large ones (rendered images) are made to measure and
+        // not kept, so that the ring never holds much memory.
+        let size = if size <= STAGING_KEEP_MAX {
+            size.max(8).next_power_of_two()
+        } else {
+            size
+        };
+        self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("gsi staging"),
+            size,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        })
+    }
+
     /// Submit `enc` with copies of `buffers` appended, wait, and return their bytes.
     pub(crate) fn read_back<const N: usize>(
         &self,
         mut enc: wgpu::CommandEncoder,
         buffers: [&wgpu::Buffer; N],
     ) -> Result<[Vec<u8>; N]> {
-        // One staging buffer per source: each fits the adapter since its source does.
+        // One staging buffer per source, from the ring when one there is large enough.
         let staging = buffers.map(|b| {
-            let s = self.device.create_buffer(&wgpu::BufferDescriptor {
-                label: None,
-                size: b.size(),
-                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            });
+            let s = self.staging_buffer(b.size());
             enc.copy_buffer_to_buffer(b, 0, &s, 0, b.size());
             s
         });
@@ -606,14 +644,20 @@ impl Gpu {
             ));
         }
         let mut out = Vec::with_capacity(N);
-        for s in &staging {
+        for (s, b) in staging.iter().zip(buffers) {
             let view = s
                 .slice(..)
                 .get_mapped_range()
                 .map_err(|e| Error::new(ErrorKind::Device, format!("GPU: {e}")))?;
-            out.push(view.to_vec());
+            out.push(view[..b.size() as usize].to_vec());
             drop(view);
             s.unmap();
+        }
+        let mut ring = self.staging.lock().unwrap_or_else(|e| e.into_inner());
+        for s in staging {
+            if ring.len() < STAGING_RING && s.size() <= STAGING_KEEP_MAX {
+                ring.push(s);
+            }
         }
         Ok(out.try_into().expect("N parts"))
     }
