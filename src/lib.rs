@@ -5,7 +5,7 @@
 //! rendering: the Gaussians are evaluated at the pixel centres of an output of any size.
 //!
 //! Four representations, each with one home: bytes ([`format`](mod@format)), records (quantized
-//! attributes, [`format::Records`]), the float model ([`model`]) and pixels ([`render`]).
+//! attributes, [`format::Records`]), the float model ([`model`]) and pixels ([`mod@render`]).
 //!
 //! # Embedding the decoder
 //!

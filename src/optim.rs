@@ -1,10 +1,10 @@
 //! The optimizer both stages train with: Adam (Kingma & Ba 2015), in one home.
 //!
-//! [`AdamRule`] is the arithmetic of one update, written once. [`Adam`] applies it to a
-//! Gaussian set with a learning rate per attribute (stage 1, `fit`); [`FlatAdam`] to a
+//! `AdamRule` is the arithmetic of one update, written once. [`Adam`] applies it to a
+//! Gaussian set with a learning rate per attribute (stage 1, `fit`); `FlatAdam` to a
 //! flat parameter vector (stage 2's enhancer, `enhance::fit`). The GPU twin of [`Adam`]
 //! (`shaders/fit_adam.wgsl`) takes its state from [`Adam`]'s fields and its bias
-//! corrections from [`AdamRule::corrections`], and hands the state back in the same shape.
+//! corrections from `AdamRule::corrections`, and hands the state back in the same shape.
 
 use crate::contract::{LN_SIGMA_MAX, LN_SIGMA_MIN};
 use crate::model::GaussianSet;

@@ -1,6 +1,6 @@
 //! Deterministic random Gaussian sets, for the corpus, benchmarks, fuzzing and tests.
 //!
-//! The generator is the crate's own [`SplitMix64`], so that the checked-in corpus and its
+//! The generator is the crate's own `SplitMix64` (`rng`), so that the checked-in corpus and its
 //! golden hashes never change with a dependency upgrade.
 
 use crate::model::{Blend, CovParam, GaussianSet, Scene};

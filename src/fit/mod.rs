@@ -272,7 +272,7 @@ impl<'a> Fitter<'a> {
     }
 
     /// Take this fitter's steps on `gpu`. With the L2 loss the whole step runs there
-    /// ([`resident`]) and the state comes back only at [`Fitter::sync`]; with the
+    /// (`fit::resident`) and the state comes back only at [`Fitter::sync`]; with the
     /// MS-SSIM loss the render and backward passes run there and the rest on the CPU.
     /// If the GPU fails, the fitter continues on the CPU and [`Fitter::fallback`] says why.
     #[cfg(feature = "gpu")]

@@ -1,9 +1,9 @@
 //! The GPU device layer, with wgpu compute shaders (`shaders/`): the device, kernels and
 //! buffers every GPU user shares, the renderer, and the resident forward half. It knows
 //! no stage; each stage keeps its GPU twin beside its CPU code and asks this layer for its
-//! kernels ([`Gpu::kernels`]). Its error is [`Error`].
+//! kernels (`Gpu::kernels`). Its error is [`Error`].
 //!
-//! - [`Gpu::render`] gives the pixels of [`crate::render`]: projection and tile binning
+//! - [`Gpu::render`] gives the pixels of [`mod@crate::render`]: projection and tile binning
 //!   are the CPU's own ([`project_scene`], `render::tiles`), and the shader evaluates spec
 //!   §6 per pixel in the same `f32` order, so the only difference is the rounding of `exp`
 //!   (within 1/255 after 8-bit conversion; `cli/tests/gpu.rs` holds it to that).
