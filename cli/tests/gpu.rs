@@ -645,3 +645,28 @@ fn round_trips_per_step_and_per_iteration() {
     assert_eq!(measured, (1.0, 1.0, 0.0));
     assert!(enhance.1 <= 2.0 && enhance.2 == 0.0, "{enhance:?}");
 }
+
+/// More Gaussians than one block of the multi-workgroup scan (`fit_scan.wgsl`, 4096 per
+/// block), with some blocks empty of drawn Gaussians: a resident scene still draws the
+/// CPU's pixels, so every block's offsets are right.
+#[test]
+fn a_resident_scene_of_many_blocks_draws_the_cpu_pixels() {
+    let Some(gpu) = gpu() else { return };
+    let (w, h) = (640, 480);
+    for (n, blend) in [(20_000, Blend::Alpha), (9_000, Blend::Sum)] {
+        let scene = random_scene(13, SceneSpec::new(w, h, n, blend));
+        let cpu = gsi::render::render(&scene, w, h).unwrap().to_rgb8();
+        let resident = gsi::gpu::GpuScene::new(&gpu, &scene, w, h).unwrap();
+        let img = resident.image().unwrap().to_rgb8();
+        let rim = box_rims(&scene, w, h);
+        let diffs: Vec<u8> = cpu.iter().zip(&img).map(|(a, b)| a.abs_diff(*b)).collect();
+        let off: Vec<usize> = (0..diffs.len()).filter(|&i| diffs[i] > 1).collect();
+        let stray = off.iter().filter(|&&i| !rim[i / 3]).count();
+        let worst = diffs.iter().copied().max().unwrap_or(0);
+        assert!(
+            stray == 0 && worst <= 3,
+            "{n} Gaussians, {blend:?}: {} values off, {stray} off every box rim, worst {worst}",
+            off.len()
+        );
+    }
+}

@@ -18,6 +18,10 @@ use crate::model::Blend;
 use crate::model::{CovParam, GaussianSet, Scene};
 use crate::render::{RgbImage, TILE};
 
+/// Gaussians each invocation of the scan's blocks sums (`SCAN_PER`): a block is
+/// `GROUP · SCAN_PER` Gaussians, one workgroup.
+pub(crate) const SCAN_PER: u32 = 16;
+
 /// Floats per Gaussian in the parameter and moment buffers (`STRIDE` of
 /// `fit_common.wgsl`): u, v, ln σ1, ln σ2, θ, r, g, b, opacity.
 pub(crate) const STRIDE: usize = 9;
@@ -29,7 +33,8 @@ pub(crate) const GROUP: u32 = 256;
 pub(crate) struct ForwardKernels {
     pub range: Kernel,
     pub project: Kernel,
-    pub scan: Kernel,
+    /// `fit_scan.wgsl`'s `blocks`, `top` and `apply`, sharing one bind group.
+    pub scan: [Kernel; 3],
     pub emit: Kernel,
     pub tiles: Kernel,
     pub sort: RadixSort,
@@ -43,7 +48,14 @@ impl ForwardKernels {
         ForwardKernels {
             range: k("fit_range", shader!("fit_common", "fit_range"), 1, 1),
             project: k("fit_project", shader!("fit_common", "fit_project"), 2, 3),
-            scan: k("fit_scan", shader!("fit_common", "fit_scan"), 1, 2),
+            scan: Kernel::entries(
+                device,
+                "fit_scan",
+                &shader!("fit_common", "fit_scan"),
+                ["blocks", "top", "apply"],
+                1,
+                3,
+            ),
             emit: k("fit_emit", shader!("fit_common", "fit_emit"), 2, 2),
             tiles: k("fit_tiles", shader!("fit_common", "fit_tiles"), 2, 1),
             sort: RadixSort::new(device),
@@ -142,6 +154,8 @@ pub(crate) struct Forward {
     range: wgpu::BindGroup,
     project: wgpu::BindGroup,
     scan: wgpu::BindGroup,
+    /// Workgroups of the scan's `blocks` and `apply`: one per block of Gaussians.
+    scan_groups: (u32, u32),
     render_params: wgpu::Buffer,
     pub gaussian_groups: (u32, u32),
     tile_groups: (u32, u32),
@@ -185,6 +199,8 @@ impl Forward {
         let touched = gpu.zeroed(n * 4);
         let first_entry = gpu.zeroed(n * 4);
         let entries = gpu.zeroed(4);
+        let blocks = n.div_ceil(u64::from(GROUP * SCAN_PER)).max(1);
+        let block_sums = gpu.zeroed(blocks * 4);
         // Render's own uniform block: the whole image, one band.
         let render_params = gpu.uniform_buffer(bytemuck::cast_slice(&[
             w,
@@ -202,9 +218,11 @@ impl Forward {
                 device,
                 &[&fit, &params, &ranges, &gaussians, &boxes, &touched],
             ),
-            scan: k
-                .scan
-                .bind(device, &[&fit, &touched, &first_entry, &entries]),
+            scan: k.scan[0].bind(
+                device,
+                &[&fit, &touched, &first_entry, &entries, &block_sums],
+            ),
+            scan_groups: gpu.groups(blocks * u64::from(GROUP))?,
             image: gpu.zeroed(pixels * 12),
             offsets: gpu.zeroed((tiles + 1) * 4),
             gaussian_groups: gpu.groups(n)?,
@@ -220,17 +238,24 @@ impl Forward {
         })
     }
 
+    /// The scan's three dispatches: block sums, block offsets, the Gaussians' offsets.
+    fn scan<'a>(&'a self, k: &'a ForwardKernels) -> [Dispatch<'a>; 3] {
+        [
+            (&k.scan[0], &self.scan, self.scan_groups),
+            (&k.scan[1], &self.scan, (1, 1)),
+            (&k.scan[2], &self.scan, self.scan_groups),
+        ]
+    }
+
     /// The tile-list entries the Gaussians need as uploaded (a projection and a scan on
     /// the GPU, and one number read back).
     pub(crate) fn count_entries(&self, gpu: &Gpu) -> Result<u64> {
         let k = ForwardKernels::of(gpu);
         let mut enc = gpu.encoder();
+        let [a, b, c] = self.scan(k);
         gpu.pass(
             &mut enc,
-            &[
-                (&k.project, &self.project, self.gaussian_groups),
-                (&k.scan, &self.scan, (1, 1)),
-            ],
+            &[(&k.project, &self.project, self.gaussian_groups), a, b, c],
         );
         let [entries] = gpu.read_back(enc, [&self.entries])?;
         Ok(u64::from(bytemuck::cast_slice::<u8, u32>(&entries)[0]))
@@ -245,17 +270,19 @@ impl Forward {
         quantized: bool,
     ) {
         let k = ForwardKernels::of(gpu);
-        let range = (&k.range, &self.range, (1, 1));
-        let rest = [
-            (&k.project, &self.project, self.gaussian_groups),
-            (&k.scan, &self.scan, (1, 1)),
-            (&k.emit, &lists.emit, self.gaussian_groups),
-        ];
+        let [a, b, c] = self.scan(k);
+        let mut dispatches = Vec::with_capacity(6);
         if quantized {
-            gpu.pass(enc, &[range, rest[0], rest[1], rest[2]]);
-        } else {
-            gpu.pass(enc, &rest);
+            dispatches.push((&k.range, &self.range, (1, 1)));
         }
+        dispatches.extend([
+            (&k.project, &self.project, self.gaussian_groups),
+            a,
+            b,
+            c,
+            (&k.emit, &lists.emit, self.gaussian_groups),
+        ]);
+        gpu.pass(enc, &dispatches);
         lists.plan.record(&k.sort, enc);
     }
 

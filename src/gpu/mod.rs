@@ -75,6 +75,7 @@ fn contract() -> String {
     for (name, value) in [
         ("TILE", TILE),
         ("GROUP", forward::GROUP),
+        ("SCAN_PER", forward::SCAN_PER),
         ("STRIDE", forward::STRIDE as u32),
         ("SLOT", SLOT as u32),
         ("SORT_BLOCK", sort::BLOCK),

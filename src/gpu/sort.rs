@@ -9,6 +9,7 @@
 //! (written by an earlier kernel), which the host never reads: every kernel is dispatched
 //! for the buffers' capacity and ignores the items past the count.
 
+use super::forward::SCAN_PER;
 use super::Kernel;
 use super::{Error, ErrorKind, Result};
 use wgpu::util::DeviceExt;
@@ -22,7 +23,8 @@ const BINS: u64 = 1 << DIGIT_BITS;
 /// The pipelines, built once per device.
 pub(crate) struct RadixSort {
     histogram: Kernel,
-    scan: Kernel,
+    /// `sort_scan.wgsl`'s `chunks`, `top` and `apply`, sharing one bind group.
+    scan: [Kernel; 3],
     scatter: Kernel,
 }
 
@@ -36,12 +38,13 @@ impl RadixSort {
                 2,
                 1,
             ),
-            scan: Kernel::new(
+            scan: Kernel::entries(
                 device,
                 "sort_scan",
                 &shader!("sort_common", "sort_scan"),
+                ["chunks", "top", "apply"],
                 0,
-                1,
+                2,
             ),
             scatter: Kernel::new(
                 device,
@@ -71,6 +74,8 @@ pub(crate) struct SortPlan {
     passes: Vec<Pass>,
     /// Workgroups per dispatch of the per-block kernels, a 2D grid covering every block.
     groups: (u32, u32),
+    /// Workgroups of the scan's per-chunk kernels.
+    scan_groups: (u32, u32),
     /// With an odd pass count the result ends in the scratch buffers: `(scratch keys,
     /// scratch values, caller's keys, caller's values, bytes)` to copy back.
     copy_back: Option<(wgpu::Buffer, wgpu::Buffer, wgpu::Buffer, wgpu::Buffer, u64)>,
@@ -123,6 +128,7 @@ impl SortPlan {
             return Ok(SortPlan {
                 passes: Vec::new(),
                 groups: (0, 0),
+                scan_groups: (0, 0),
                 copy_back: None,
             });
         }
@@ -138,6 +144,11 @@ impl SortPlan {
         };
         let (scratch_keys, scratch_values, hist) =
             (storage(bytes), storage(bytes), storage(hist_bytes));
+        // The scan's chunks of the histogram, one workgroup each.
+        let chunks = (BINS * u64::from(blocks)).div_ceil(BINS * u64::from(SCAN_PER)) as u32;
+        let chunk_sums = storage(u64::from(chunks.max(1)) * 4);
+        let cx = chunks.clamp(1, max_groups);
+        let scan_groups = (cx, chunks.div_ceil(cx).max(1));
         // Pass p reads `from` and writes `to`, alternating caller → scratch → caller. The
         // bind groups keep the scratch buffers alive (wgpu counts references).
         let (mut from, mut to) = ((keys, values), (&scratch_keys, &scratch_values));
@@ -153,7 +164,7 @@ impl SortPlan {
                     histogram: sort
                         .histogram
                         .bind(device, &[&params, count, from.0, &hist]),
-                    scan: sort.scan.bind(device, &[&params, &hist]),
+                    scan: sort.scan[0].bind(device, &[&params, &hist, &chunk_sums]),
                     scatter: sort
                         .scatter
                         .bind(device, &[&params, count, from.0, from.1, &hist, to.0, to.1]),
@@ -174,6 +185,7 @@ impl SortPlan {
         Ok(SortPlan {
             passes,
             groups,
+            scan_groups,
             copy_back,
         })
     }
@@ -192,7 +204,9 @@ impl SortPlan {
             for p in &self.passes {
                 sort.histogram
                     .dispatch(&mut pass, &p.histogram, self.groups);
-                sort.scan.dispatch(&mut pass, &p.scan, (1, 1));
+                sort.scan[0].dispatch(&mut pass, &p.scan, self.scan_groups);
+                sort.scan[1].dispatch(&mut pass, &p.scan, (1, 1));
+                sort.scan[2].dispatch(&mut pass, &p.scan, self.scan_groups);
                 sort.scatter.dispatch(&mut pass, &p.scatter, self.groups);
             }
         }
