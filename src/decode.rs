@@ -58,20 +58,12 @@ pub struct Image {
 /// # Ok::<(), gsi::Error>(())
 /// ```
 pub fn decode<R: Read>(input: R, width: u32, height: u32) -> Result<Image> {
-    let mut reader = Reader::new(input)?;
-    reader.set_output_size(width, height)?;
-    let format = reader.pixel_format();
-    let bytes = reader.output_buffer_size()?;
-    reader
-        .limits
-        .check_alloc(bytes as u64, "the decoded image")?;
-    let mut data = vec![0u8; bytes];
-    reader.read_image(&mut data)?;
+    let reader = Reader::new(input)?;
     Ok(Image {
         width,
         height,
-        format,
-        data,
+        format: PixelFormat::Rgb8,
+        data: render::render_rgb8(&reader.scene, width, height, &reader.limits)?,
     })
 }
 
@@ -159,15 +151,7 @@ impl Reader {
     /// Bytes [`Reader::read_image`] fills; an error if they cannot be addressed.
     pub fn output_buffer_size(&self) -> Result<usize> {
         let (w, h) = self.size;
-        usize::try_from(u64::from(w) * u64::from(h))
-            .ok()
-            .and_then(|px| px.checked_mul(self.format.bytes_per_pixel()))
-            .ok_or_else(|| {
-                Error::new(
-                    ErrorKind::LimitExceeded,
-                    format!("output {w}x{h} does not fit in memory"),
-                )
-            })
+        render::buffer_len(w, h, self.format.bytes_per_pixel(), &self.limits)
     }
 
     /// Render into `buf`, which must hold exactly [`Reader::output_buffer_size`] bytes.

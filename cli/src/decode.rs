@@ -60,13 +60,7 @@ pub fn run(args: Args) -> Result<(), Failure> {
     let scene = f.records.to_scene();
     // On the CPU, tiles are blended a band at a time straight into the 8-bit output: 3
     // bytes per pixel in memory, not a float image and then an 8-bit copy.
-    let cpu = |scene: &gsi::Scene| -> Result<Vec<u8>, Failure> {
-        let len = w as usize * ht as usize * 3;
-        Limits::default().check_alloc(len as u64, "the decoded image")?;
-        let mut rgb = vec![0u8; len];
-        gsi::render::render_rgb8_into(scene, w, ht, &mut rgb)?;
-        Ok(rgb)
-    };
+    let cpu = |scene: &gsi::Scene| gsi::render::render_rgb8(scene, w, ht, &Limits::default());
     let rgb = match device::open(args.device, "decoding", false)? {
         None => cpu(&scene)?,
         Some(gpu) => match gpu.render(&scene, w, ht) {

@@ -96,15 +96,36 @@ pub(crate) fn to_u8(c: f32) -> u8 {
 /// With the `parallel` feature, tile rows are spread over rayon's pool; the result is
 /// bit-identical to the sequential build.
 pub fn render(scene: &Scene, width: u32, height: u32) -> Result<RgbImage> {
-    let len = buffer_len(width, height, 3, &Limits::default())?;
-    Limits::default().check_alloc(len as u64 * 4, "the rendered image")?;
-    let mut data = vec![0.0; len];
+    let mut data = allocate(width, height, 3, 4, &Limits::default())?;
     render_into(scene, width, height, &mut data)?;
     Ok(RgbImage {
         width,
         height,
         data,
     })
+}
+
+/// 8-bit RGB of `scene` at `width × height` in a new buffer (the values
+/// [`RgbImage::to_rgb8`] gives, with no `f32` image made), refused over `limits`: the
+/// output's pixels, and its `width·height·3` bytes against `max_alloc`.
+pub fn render_rgb8(scene: &Scene, width: u32, height: u32, limits: &Limits) -> Result<Vec<u8>> {
+    let mut rgb = allocate(width, height, 3, 1, limits)?;
+    render_rgb8_into(scene, width, height, &mut rgb)?;
+    Ok(rgb)
+}
+
+/// A zeroed buffer of `per_pixel` values of `bytes` bytes each for a `width × height`
+/// output, after checking its size and its allocation against `limits`.
+fn allocate<T: Clone + Default>(
+    width: u32,
+    height: u32,
+    per_pixel: usize,
+    bytes: u64,
+    limits: &Limits,
+) -> Result<Vec<T>> {
+    let len = buffer_len(width, height, per_pixel, limits)?;
+    limits.check_alloc(len as u64 * bytes, "the rendered image")?;
+    Ok(vec![T::default(); len])
 }
 
 /// Render into a caller-provided buffer of exactly `width * height * 3` floats
@@ -169,7 +190,12 @@ fn render_as<O: cpu::Output>(
 
 /// Number of values of a `width × height` buffer of `per_pixel` values, refusing empty
 /// sizes, sizes over `limits` and unaddressable ones.
-fn buffer_len(width: u32, height: u32, per_pixel: usize, limits: &Limits) -> Result<usize> {
+pub(crate) fn buffer_len(
+    width: u32,
+    height: u32,
+    per_pixel: usize,
+    limits: &Limits,
+) -> Result<usize> {
     limits.check_output(width, height)?;
     usize::try_from(u64::from(width) * u64::from(height))
         .ok()
