@@ -142,8 +142,29 @@ fn bytes_per_gaussian(bits: BitDepths, blend: Blend) -> f32 {
     b as f32 / 8.0
 }
 
+/// A resident fit's report as the fitter counts steps (`base` taken before it started).
+#[cfg(feature = "gpu")]
+fn measured(r: resident::StepReport, base: u64) -> Measured {
+    Measured {
+        step: base + r.step,
+        loss: r.loss,
+        psnr: r.psnr,
+    }
+}
+
 /// Fixed bytes of a file: signature, header, gCRM, chunk frames and quantizer preambles.
 const FILE_OVERHEAD: f32 = 300.0;
+
+/// What a fitting step measured ([`Fitter::step`] with `measure`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Measured {
+    /// Which step (1 for the fitter's first).
+    pub step: u64,
+    /// Loss of the step's render.
+    pub loss: f32,
+    /// PSNR (dB, 8-bit) of the step's render.
+    pub psnr: f64,
+}
 
 /// The fitting state: parameters, optimizer, target.
 pub struct Fitter<'a> {
@@ -157,13 +178,17 @@ pub struct Fitter<'a> {
     seed: u64,
     /// Why the fitter left its GPU for the CPU, once it has.
     fallback: Option<String>,
+    /// Steps taken.
+    steps: u64,
+    /// A measurement collected early (by [`Fitter::sync`]), for the next step or flush.
+    ready: Option<Measured>,
     /// Where [`Fitter::step`] runs, when not on the CPU.
     #[cfg(feature = "gpu")]
     gpu: Option<&'a crate::gpu::Gpu>,
-    /// The L2 fit living on the GPU between [`Fitter::sync`]s; while it exists,
-    /// `params` and `adam` are those of the last sync.
+    /// The L2 fit living on the GPU between [`Fitter::sync`]s, and the steps taken
+    /// before it started; while it exists, `params` and `adam` are those of the last sync.
     #[cfg(feature = "gpu")]
-    resident: Option<resident::ResidentFit<'a>>,
+    resident: Option<(resident::ResidentFit<'a>, u64)>,
 }
 
 impl<'a> Fitter<'a> {
@@ -185,6 +210,8 @@ impl<'a> Fitter<'a> {
             loss: loss::LossFn::new(loss),
             seed,
             fallback: None,
+            steps: 0,
+            ready: None,
             #[cfg(feature = "gpu")]
             gpu: None,
             #[cfg(feature = "gpu")]
@@ -245,14 +272,53 @@ impl<'a> Fitter<'a> {
 
     /// One optimizer step. With `qat`, the forward pass renders the quantized parameters
     /// and their gradient is applied to the float ones (straight-through). When `measure`
-    /// is set, returns the loss and the PSNR of the image the step rendered (a GPU fit
+    /// is set, the loss and PSNR of the image the step rendered are measured (a GPU fit
     /// reads nothing back otherwise).
+    ///
+    /// Returns the measurement that became ready: on the CPU this step's; on the GPU
+    /// that of the last measured step before this one, read back after this step was
+    /// submitted so that the device does not wait for the host. [`Fitter::flush`]
+    /// collects what is still to come.
     pub fn step(
         &mut self,
         lr: &LearningRates,
         qat: Option<BitDepths>,
         measure: bool,
-    ) -> Option<(f32, f64)> {
+    ) -> Option<Measured> {
+        self.steps += 1;
+        let now = self.step_now(lr, qat, measure);
+        match (self.ready.take(), now) {
+            (Some(early), Some(now)) => {
+                self.ready = Some(now);
+                Some(early)
+            }
+            (early, now) => early.or(now),
+        }
+    }
+
+    /// The measurements still to come from earlier steps, one per call (`None` when all
+    /// have been returned). Waits for the GPU.
+    pub fn flush(&mut self) -> Option<Measured> {
+        if let Some(m) = self.ready.take() {
+            return Some(m);
+        }
+        #[cfg(feature = "gpu")]
+        if let Some((resident, base)) = self.resident.as_mut() {
+            let base = *base;
+            match resident.collect() {
+                Ok(report) => return report.map(|r| measured(r, base)),
+                Err(e) => self.resident_failed(&e),
+            }
+        }
+        None
+    }
+
+    fn step_now(
+        &mut self,
+        lr: &LearningRates,
+        qat: Option<BitDepths>,
+        measure: bool,
+    ) -> Option<Measured> {
         #[cfg(feature = "gpu")]
         if let Some(done) = self.step_resident(lr, qat, measure) {
             return done;
@@ -268,7 +334,11 @@ impl<'a> Fitter<'a> {
         let mut grads = optim::zeros_like(&self.params);
         params::chain(&scene.gaussians, &projected, &pg, w, h, &mut grads);
         self.adam.step(&mut self.params, &grads, lr);
-        psnr.map(|p| (value, p))
+        psnr.map(|psnr| Measured {
+            step: self.steps,
+            loss: value,
+            psnr,
+        })
     }
 
     /// Take this fitter's steps on `gpu`. With the L2 loss the whole step runs there
@@ -287,14 +357,19 @@ impl<'a> Fitter<'a> {
 
     /// Bring the parameters and Adam's state back from the GPU, if they live there, so
     /// that `params` and [`Fitter::scene`] are current. Pruning, colour solves and
-    /// the final measurement call it themselves.
+    /// the final measurement call it themselves. A measurement still to come is kept for
+    /// the next [`Fitter::step`] or [`Fitter::flush`].
     pub fn sync(&mut self) {
         #[cfg(feature = "gpu")]
-        if let Some(resident) = self.resident.take() {
-            match resident.download() {
-                Ok((params, adam)) => {
+        if let Some((mut resident, base)) = self.resident.take() {
+            let report = resident.collect();
+            match report.and_then(|r| Ok((r, resident.download()?))) {
+                Ok((report, (params, adam))) => {
                     self.params = params;
                     self.adam = adam;
+                    if let Some(r) = report {
+                        self.ready = self.ready.or(Some(measured(r, base)));
+                    }
                 }
                 Err(e) => self.gpu_failed(&e),
             }
@@ -309,7 +384,7 @@ impl<'a> Fitter<'a> {
         lr: &LearningRates,
         qat: Option<BitDepths>,
         measure: bool,
-    ) -> Option<Option<(f32, f64)>> {
+    ) -> Option<Option<Measured>> {
         let gpu = self.gpu?;
         if self.loss.kind() != Loss::L2 {
             return None;
@@ -317,27 +392,33 @@ impl<'a> Fitter<'a> {
         if self.resident.is_none() {
             match resident::ResidentFit::new(gpu, self.target, self.blend, &self.params, &self.adam)
             {
-                Ok(r) => self.resident = Some(r),
+                Ok(r) => self.resident = Some((r, self.steps - 1)),
                 Err(e) => {
                     self.gpu_failed(&e);
                     return None;
                 }
             }
         }
-        let resident = self.resident.as_mut()?;
+        let (resident, base) = self.resident.as_mut()?;
+        let base = *base;
         match resident.step(lr, qat, measure) {
-            Ok(report) => Some(report.map(|r| (r.loss, r.psnr))),
+            Ok(report) => Some(report.map(|r| measured(r, base))),
             Err(e) => {
-                // Continue from what the GPU holds if it can still say, else from the
-                // last sync.
-                if let Some(Ok((params, adam))) = self.resident.take().map(|r| r.download()) {
-                    self.params = params;
-                    self.adam = adam;
-                }
-                self.gpu_failed(&e);
+                self.resident_failed(&e);
                 None
             }
         }
+    }
+
+    /// Leave a failed resident fit for the CPU, continuing from what the GPU holds if it
+    /// can still say, else from the last sync.
+    #[cfg(feature = "gpu")]
+    fn resident_failed(&mut self, e: &crate::gpu::Error) {
+        if let Some(Ok((params, adam))) = self.resident.take().map(|(r, _)| r.download()) {
+            self.params = params;
+            self.adam = adam;
+        }
+        self.gpu_failed(e);
     }
 
     #[cfg(feature = "gpu")]
@@ -524,6 +605,14 @@ pub fn encode(
         |fitter: &mut Fitter, total: u32, curve: &mut Vec<Progress>, stop_at: Option<f64>| {
             let qat_from = ((1.0 - opts.qat_fraction) * total as f32) as u32;
             let densify_at = [total / 4, total / 2];
+            // Measurements may come a step late (a GPU fit's): each says which step it is.
+            let base = fitter.steps;
+            let mut on_measured = |m: Measured, fitter: &Fitter, curve: &mut Vec<Progress>| {
+                let it = (m.step - base) as u32;
+                report(it, total, fitter.params.len(), m.loss, m.psnr, curve);
+                // Stop once a quantization-aware step reaches the target.
+                stop_at.is_some_and(|p| it > qat_from && m.psnr >= p)
+            };
             for it in 0..total {
                 if opts.densify && densify_at.contains(&it) && it > 0 {
                     let n_now = fitter.params.len();
@@ -535,12 +624,12 @@ pub fn encode(
                 let qat = (it >= qat_from).then_some(bits);
                 let measure = it % 10 == 0 || it + 1 == total;
                 let done = fitter.step(&opts.lr.scaled(schedule(it, total)), qat, measure);
-                if let Some((loss, psnr)) = done {
-                    report(it + 1, total, fitter.params.len(), loss, psnr, curve);
-                    if stop_at.is_some_and(|p| qat.is_some() && psnr >= p) {
-                        break;
-                    }
+                if done.is_some_and(|m| on_measured(m, fitter, curve)) {
+                    break;
                 }
+            }
+            while let Some(m) = fitter.flush() {
+                on_measured(m, fitter, curve);
             }
         };
     let stop_at = match opts.budget {

@@ -17,17 +17,20 @@
 //! The host writes one uniform block per step (learning rates, bias corrections) and reads
 //! back only when asked for progress: the partial sums of the loss and of the 8-bit
 //! squared error, and the number of tile-list entries, which is how the buffers learn
-//! that they must grow. A step whose lists overflowed is skipped on the GPU
-//! (`fit_adam.wgsl`). The lists hold twice the entries of the last report and are doubled
-//! again whenever a report finds them three-quarters full, so a skip takes a set whose
-//! tile coverage grows by a third within the ten steps between two reports.
+//! that they must grow. That report is read one step late: the measured step's copies are
+//! submitted with it, and the host collects them after it has submitted the next step,
+//! so the device never waits for the host (on a fast GPU a step takes about as long as a
+//! round trip). A step whose lists overflowed is skipped on the GPU (`fit_adam.wgsl`).
+//! The lists hold twice the entries of the last report and are doubled again whenever a
+//! report finds them three-quarters full, so a skip takes a set whose tile coverage grows
+//! by a third within the ten steps between two reports.
 //!
 //! Pruning, re-placement and colour solves stay on the CPU ([`crate::fit::Fitter`]): the
 //! fitter downloads the state before them and uploads it after, a few times per fit.
 
 use crate::format::{BitDepths, Limits, MAX_BITS};
 use crate::gpu::forward::{capacity_for, flatten, FitUniform, Forward, ForwardLists, STRIDE};
-use crate::gpu::{shader, too_big, Gpu, Kernel, SLOT};
+use crate::gpu::{shader, too_big, Gpu, Kernel, PendingRead, SLOT};
 use crate::gpu::{Error, ErrorKind, Result};
 use crate::model::{Blend, GaussianSet};
 use crate::optim::{Adam, AdamRule, LearningRates};
@@ -59,6 +62,8 @@ impl StepKernels {
 /// What a step measured, when asked.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StepReport {
+    /// Which step (1 for this fit's first [`ResidentFit::step`]).
+    pub step: u64,
     /// L2 loss of the rendered image.
     pub loss: f32,
     /// PSNR (dB, 8-bit) of the rendered image, as `fit::loss::psnr8` computes it.
@@ -97,6 +102,11 @@ pub struct ResidentFit<'g> {
     lists: Lists,
     /// Capacity the lists must grow to before the next step.
     grow_to: Option<u32>,
+    /// Steps taken.
+    steps: u64,
+    /// The last measured step's report, submitted and not yet collected, with its step
+    /// and the lists' capacity then: partial loss sums, partial squared errors, entries.
+    pending: Option<(PendingRead<3>, u64, u32)>,
 }
 
 impl<'g> ResidentFit<'g> {
@@ -156,15 +166,19 @@ impl<'g> ResidentFit<'g> {
                 back,
                 lists,
                 grow_to: None,
+                steps: 0,
+                pending: None,
             })
         })
     }
 
     /// One optimizer step with learning rates `lr`; with `qat`, the render uses the
     /// parameters quantized to those bit depths and the gradient moves the float ones
-    /// (straight-through). When `measure` is set, waits for the GPU and returns the loss
-    /// and PSNR of the image this step rendered, or `None` if its tile lists overflowed
-    /// (the step was skipped, and the lists grow before the next).
+    /// (straight-through). When `measure` is set, the step's loss and PSNR are read back
+    /// one step late: returned by the next call (after it has submitted its own step) or
+    /// by [`ResidentFit::collect`]. Returns the report that became ready, if any; a
+    /// measured step whose tile lists overflowed gives none (it was skipped, and the
+    /// lists grow before the next step).
     pub fn step(
         &mut self,
         lr: &LearningRates,
@@ -178,6 +192,7 @@ impl<'g> ResidentFit<'g> {
                 self.lists = Lists::new(gpu, &self.forward, &self.back, self.blend, capacity)?;
             }
             self.adam_step += 1;
+            self.steps += 1;
             let u = &mut self.uniform;
             u.capacity = self.lists.forward.capacity;
             (u.c1, u.c2) = AdamRule::at(u.beta1, u.beta2, u.eps, self.adam_step).corrections();
@@ -205,41 +220,65 @@ impl<'g> ResidentFit<'g> {
                     (&k.adam, &l.adam, f.gaussian_groups),
                 ],
             );
-            if !measure {
+            let earlier = self.pending.take();
+            if measure {
+                let read = gpu.read_back_later(enc, [&b.loss_part, &b.sse8_part, &f.entries]);
+                self.pending = Some((read, self.steps, l.forward.capacity));
+            } else {
                 gpu.submit([enc.finish()]);
-                return Ok(None);
             }
-            let [loss_part, sse8_part, entries] =
-                gpu.read_back(enc, [&b.loss_part, &b.sse8_part, &f.entries])?;
-            let entries = bytemuck::cast_slice::<u8, u32>(&entries)[0];
-            let loss: f64 = bytemuck::cast_slice::<u8, f32>(&loss_part)
-                .iter()
-                .map(|&x| f64::from(x))
-                .sum();
-            let sse: u64 = bytemuck::cast_slice::<u8, u32>(&sse8_part)
-                .iter()
-                .map(|&x| u64::from(x))
-                .sum();
-            let values = u64::from(self.uniform.width) * u64::from(self.uniform.height) * 3;
-            let (entries, capacity) = (u64::from(entries), u64::from(self.lists.forward.capacity));
-            if entries * 4 > capacity * 3 {
-                let grown = capacity_for(entries);
-                if u64::from(grown) < entries {
-                    return Err(too_big(&gpu.info, "the tile lists of this fit"));
-                }
-                self.grow_to = Some(grown);
+            match earlier {
+                Some(p) => self.report(p),
+                None => Ok(None),
             }
-            if entries > capacity {
-                // Skipped, so not counted in Adam's bias correction (an unmeasured step that
-                // overflowed before it still is: the host cannot know of it).
-                self.adam_step -= 1;
-                return Ok(None);
-            }
-            Ok(Some(StepReport {
-                loss: (loss / values as f64) as f32,
-                psnr: crate::metrics::psnr_of_sse(sse, values),
-            }))
         })
+    }
+
+    /// Wait for the last measured step's report, if one is still to come.
+    pub fn collect(&mut self) -> Result<Option<StepReport>> {
+        match self.pending.take() {
+            Some(p) => self.gpu.checked(|| self.report(p)),
+            None => Ok(None),
+        }
+    }
+
+    /// Read a measured step's report; note when its lists must grow or it was skipped.
+    fn report(
+        &mut self,
+        (read, step, capacity): (PendingRead<3>, u64, u32),
+    ) -> Result<Option<StepReport>> {
+        let [loss_part, sse8_part, entries] = read.collect(self.gpu)?;
+        let entries = bytemuck::cast_slice::<u8, u32>(&entries)[0];
+        let loss: f64 = bytemuck::cast_slice::<u8, f32>(&loss_part)
+            .iter()
+            .map(|&x| f64::from(x))
+            .sum();
+        let sse: u64 = bytemuck::cast_slice::<u8, u32>(&sse8_part)
+            .iter()
+            .map(|&x| u64::from(x))
+            .sum();
+        let values = u64::from(self.uniform.width) * u64::from(self.uniform.height) * 3;
+        let (entries, capacity) = (u64::from(entries), u64::from(capacity));
+        let now = u64::from(self.lists.forward.capacity);
+        if entries * 4 > now * 3 {
+            let grown = capacity_for(entries);
+            if u64::from(grown) < entries {
+                return Err(too_big(&self.gpu.info, "the tile lists of this fit"));
+            }
+            self.grow_to = Some(grown.max(self.grow_to.unwrap_or(0)));
+        }
+        if entries > capacity {
+            // Skipped, so not counted in Adam's bias correction from the next step on (the
+            // step submitted since counted it, as an unmeasured step that overflows is
+            // counted: the host cannot know of them in time).
+            self.adam_step -= 1;
+            return Ok(None);
+        }
+        Ok(Some(StepReport {
+            step,
+            loss: (loss / values as f64) as f32,
+            psnr: crate::metrics::psnr_of_sse(sse, values),
+        }))
     }
 
     /// The parameters and Adam's state as they are now, shaped as the CPU fitter keeps
@@ -391,7 +430,8 @@ mod tests {
         adam.step = 0;
         let mut r = ResidentFit::new(&gpu, &t, Blend::Alpha, &fitter.params, &adam).unwrap();
         r.lists = Lists::new(&gpu, &r.forward, &r.back, Blend::Alpha, 8).unwrap();
-        r.step(&LR, None, true).unwrap();
+        assert_eq!(r.step(&LR, None, true).unwrap(), None);
+        assert_eq!(r.collect().unwrap(), None, "an overflowing step reported");
         let (after, _) = r.download().unwrap();
         assert_eq!(
             after, fitter.params,
@@ -399,7 +439,9 @@ mod tests {
         );
         let grown = r.grow_to.expect("the report asked for no more room");
         assert!(grown > 8);
-        let report = r.step(&LR, None, true).unwrap().unwrap();
+        assert_eq!(r.step(&LR, None, true).unwrap(), None);
+        let report = r.collect().unwrap().unwrap();
+        assert_eq!(report.step, 2);
         assert_eq!(r.lists.forward.capacity, grown);
         assert!(report.psnr.is_finite() && report.psnr > 10.0, "{report:?}");
         let (after, _) = r.download().unwrap();
@@ -416,16 +458,21 @@ mod tests {
             let fitter = Fitter::new(&t, 3, Init::Adaptive, blend, Loss::L2, 2);
             let adam = crate::optim::Adam::new(&fitter.params);
             let mut r = ResidentFit::new(&gpu, &t, blend, &fitter.params, &adam).unwrap();
-            for _ in 0..3 {
-                let report = r.step(&LR, None, true).unwrap().unwrap();
-                assert!(report.loss.is_finite(), "{report:?}");
+            // Each step returns the one before's report; the last is collected.
+            for step in 1..=3 {
+                let report = r.step(&LR, None, true).unwrap();
+                assert_eq!(report.map(|r| r.step), (step > 1).then_some(step - 1));
+                assert!(report.is_none_or(|r| r.loss.is_finite()), "{report:?}");
             }
+            let report = r.collect().unwrap().unwrap();
+            assert!(report.step == 3 && report.loss.is_finite(), "{report:?}");
             let mut off = fitter.params.clone();
             off.positions.iter_mut().for_each(|p| *p = [5.0, -3.0]);
             let adam = crate::optim::Adam::new(&off);
             let mut r = ResidentFit::new(&gpu, &t, blend, &off, &adam).unwrap();
-            let report = r.step(&LR, Some(crate::fit::default_bits(1, 1, blend)), true);
-            let report = report.unwrap().unwrap();
+            r.step(&LR, Some(crate::fit::default_bits(1, 1, blend)), true)
+                .unwrap();
+            let report = r.collect().unwrap().unwrap();
             // Nothing drawn: the render is black.
             let black = crate::fit::loss::psnr8(&[0.0; 3], &t.data, 1, 1);
             assert_eq!(report.psnr, black);
@@ -457,7 +504,10 @@ mod tests {
             let adam = crate::optim::Adam::new(params);
             let mut r = ResidentFit::new(&gpu, &t, Blend::Sum, params, &adam).unwrap();
             (0..6)
-                .map(|_| r.step(&LR, None, true).unwrap().unwrap().loss)
+                .map(|_| {
+                    r.step(&LR, None, true).unwrap();
+                    r.collect().unwrap().unwrap().loss
+                })
                 .collect()
         };
         let (a, b) = (losses(&inside), losses(&outside));

@@ -474,7 +474,7 @@ impl<'g> GpuScene<'g> {
 
     /// Wait until every queued draw has finished, at most [`Gpu::set_wait_timeout`].
     pub fn wait(&self) -> Result<()> {
-        self.gpu.wait()
+        self.gpu.wait(None)
     }
 
     /// Draw once more and read the image back.

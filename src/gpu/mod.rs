@@ -162,8 +162,12 @@ pub struct Gpu {
 pub struct Traffic {
     /// Command submissions.
     pub submissions: u64,
-    /// Blocking read-backs (each waits for the device and maps a result).
+    /// Read-backs (each copies results into staging buffers and maps them).
     pub read_backs: u64,
+    /// Read-backs the host waited for with nothing submitted after them: the device runs
+    /// dry from the moment it finishes until the host submits again. A read-back collected
+    /// after the next step was submitted (a progress report read one step late) is not one.
+    pub stalls: u64,
     /// Staging buffers created for read-backs (reused from a ring after the first).
     pub staging_buffers: u64,
 }
@@ -172,10 +176,12 @@ pub struct Traffic {
 struct TrafficCounters {
     submissions: std::sync::atomic::AtomicU64,
     read_backs: std::sync::atomic::AtomicU64,
+    stalls: std::sync::atomic::AtomicU64,
     staging_buffers: std::sync::atomic::AtomicU64,
 }
 
-/// Most staging buffers kept for reuse: the largest read-back takes three at once.
+/// Most staging buffers kept for reuse: the largest read-back takes three at once, and a
+/// fit reading its reports a step late keeps two of those in flight.
 const STAGING_RING: usize = 8;
 /// Largest staging buffer kept for reuse (bytes): the ring holds at most 128 MiB.
 const STAGING_KEEP_MAX: u64 = 16 << 20;
@@ -287,11 +293,14 @@ impl Gpu {
     }
 
     /// Submit command buffers, counted in [`Gpu::traffic`].
-    pub(crate) fn submit<I: IntoIterator<Item = wgpu::CommandBuffer>>(&self, buffers: I) {
+    pub(crate) fn submit<I: IntoIterator<Item = wgpu::CommandBuffer>>(
+        &self,
+        buffers: I,
+    ) -> wgpu::SubmissionIndex {
         self.traffic
             .submissions
             .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        self.queue.submit(buffers);
+        self.queue.submit(buffers)
     }
 
     /// How many submissions and blocking read-backs this device has made: the host round
@@ -301,16 +310,18 @@ impl Gpu {
         Traffic {
             submissions: get(&self.traffic.submissions),
             read_backs: get(&self.traffic.read_backs),
+            stalls: get(&self.traffic.stalls),
             staging_buffers: get(&self.traffic.staging_buffers),
         }
     }
 
-    /// Wait for the work submitted so far, at most the wait timeout: a hung or lost device
-    /// gives [`ErrorKind::TimedOut`] (and the caller the CPU) instead of blocking forever.
-    pub(crate) fn wait(&self) -> Result<()> {
+    /// Wait for submission `index` and those before it (all submitted work if `None`), at
+    /// most the wait timeout: a hung or lost device gives [`ErrorKind::TimedOut`] (and the
+    /// caller the CPU) instead of blocking forever.
+    pub(crate) fn wait(&self, index: Option<wgpu::SubmissionIndex>) -> Result<()> {
         let timeout = *self.wait_timeout.lock().unwrap_or_else(|e| e.into_inner());
         match self.device.poll(wgpu::PollType::Wait {
-            submission_index: None,
+            submission_index: index,
             timeout: Some(timeout),
         }) {
             Ok(_) => Ok(()),
@@ -591,7 +602,7 @@ impl Gpu {
             .filter(|&k| ring[k].size() >= size)
             .min_by_key(|&k| ring[k].size());
         if let Some(k) = best {
-            return ring.swap_remove(k);
+            return ring.remove(k);
         }
         drop(ring);
         self.traffic
@@ -616,51 +627,47 @@ impl Gpu {
     /// Submit `enc` with copies of `buffers` appended, wait, and return their bytes.
     pub(crate) fn read_back<const N: usize>(
         &self,
-        mut enc: wgpu::CommandEncoder,
+        enc: wgpu::CommandEncoder,
         buffers: [&wgpu::Buffer; N],
     ) -> Result<[Vec<u8>; N]> {
+        self.read_back_later(enc, buffers).collect(self)
+    }
+
+    /// Submit `enc` with copies of `buffers` appended and start mapping the copies,
+    /// without waiting: the host may record and submit more work before it collects the
+    /// result ([`PendingRead::collect`]), so that the device is never left idle while the
+    /// host waits for a report it could read a step later.
+    pub(crate) fn read_back_later<const N: usize>(
+        &self,
+        mut enc: wgpu::CommandEncoder,
+        buffers: [&wgpu::Buffer; N],
+    ) -> PendingRead<N> {
         // One staging buffer per source, from the ring when one there is large enough.
         let staging = buffers.map(|b| {
             let s = self.staging_buffer(b.size());
             enc.copy_buffer_to_buffer(b, 0, &s, 0, b.size());
-            s
+            (s, b.size())
         });
-        self.submit([enc.finish()]);
+        let index = self.submit([enc.finish()]);
         self.traffic
             .read_backs
             .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         let (tx, rx) = std::sync::mpsc::channel();
-        for s in &staging {
+        for (s, _) in &staging {
             let tx = tx.clone();
             s.slice(..).map_async(wgpu::MapMode::Read, move |r| {
-                let _ = tx.send(r);
+                let _ = tx.send(r.is_ok());
             });
         }
-        drop(tx);
-        self.wait()?;
-        if !rx.iter().all(|r| r.is_ok()) {
-            return Err(Error::new(
-                ErrorKind::Device,
-                "GPU: reading the result back failed",
-            ));
+        PendingRead {
+            staging,
+            index,
+            number: self
+                .traffic
+                .submissions
+                .load(std::sync::atomic::Ordering::Relaxed),
+            mapped: rx,
         }
-        let mut out = Vec::with_capacity(N);
-        for (s, b) in staging.iter().zip(buffers) {
-            let view = s
-                .slice(..)
-                .get_mapped_range()
-                .map_err(|e| Error::new(ErrorKind::Device, format!("GPU: {e}")))?;
-            out.push(view[..b.size() as usize].to_vec());
-            drop(view);
-            s.unmap();
-        }
-        let mut ring = self.staging.lock().unwrap_or_else(|e| e.into_inner());
-        for s in staging {
-            if ring.len() < STAGING_RING && s.size() <= STAGING_KEEP_MAX {
-                ring.push(s);
-            }
-        }
-        Ok(out.try_into().expect("N parts"))
     }
 
     /// Workgroups of [`forward::GROUP`] invocations for `n` items, laid out in two
@@ -746,6 +753,58 @@ impl Gpu {
 
 /// A kernel, what it is bound to, and its workgroups.
 pub(crate) type Dispatch<'a> = (&'a Kernel, &'a wgpu::BindGroup, (u32, u32));
+
+/// A read-back submitted by [`Gpu::read_back_later`] and not yet collected. Dropping it
+/// unread is harmless: its staging buffers are then not returned to the ring.
+pub(crate) struct PendingRead<const N: usize> {
+    /// Each staging buffer, and how many of its bytes are the result.
+    staging: [(wgpu::Buffer, u64); N],
+    index: wgpu::SubmissionIndex,
+    /// The device's submission count just after this one ([`Gpu::traffic`]).
+    number: u64,
+    /// One message per staging buffer: whether it mapped.
+    mapped: std::sync::mpsc::Receiver<bool>,
+}
+
+impl<const N: usize> PendingRead<N> {
+    /// Wait for the copies (at most the device's wait timeout) and return their bytes.
+    pub(crate) fn collect(self, gpu: &Gpu) -> Result<[Vec<u8>; N]> {
+        let relaxed = std::sync::atomic::Ordering::Relaxed;
+        if gpu.traffic.submissions.load(relaxed) == self.number {
+            gpu.traffic.stalls.fetch_add(1, relaxed);
+        }
+        gpu.wait(Some(self.index))?;
+        let mapped = (0..N).all(|_| self.mapped.try_recv() == Ok(true));
+        if !mapped {
+            return Err(Error::new(
+                ErrorKind::Device,
+                "GPU: reading the result back failed",
+            ));
+        }
+        let mut out = Vec::with_capacity(N);
+        for (s, len) in &self.staging {
+            let view = s
+                .slice(..)
+                .get_mapped_range()
+                .map_err(|e| Error::new(ErrorKind::Device, format!("GPU: {e}")))?;
+            out.push(view[..*len as usize].to_vec());
+            drop(view);
+            s.unmap();
+        }
+        // Returned to the ring, which forgets its least recently returned buffer when full:
+        // the working set of the current loop stays, that of an earlier one ages out.
+        let mut ring = gpu.staging.lock().unwrap_or_else(|e| e.into_inner());
+        for (s, _) in self.staging {
+            if s.size() <= STAGING_KEEP_MAX {
+                if ring.len() == STAGING_RING {
+                    ring.remove(0);
+                }
+                ring.push(s);
+            }
+        }
+        Ok(out.try_into().expect("N parts"))
+    }
+}
 
 /// A compute pipeline and the layout of its one bind group.
 pub(crate) struct Kernel {
