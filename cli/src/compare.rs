@@ -1,15 +1,15 @@
 //! `gsi compare`: image-quality figures of an image against a reference, or of one image
 //! alone. The conventions are those of `gsi::metrics` (and of `shared/data/README.md`).
 
-use crate::{io, Failure};
+use crate::{image_io, Failure};
 use gsi::metrics::{self, Rgb8};
 use serde_json::{json, Value};
-use std::io::Read;
 use std::path::{Path, PathBuf};
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// The reference image, PNG or JPEG (`-` for standard input); with --no-reference,
+    /// The reference image, in any format `gsi encode` reads (`-` for standard input); with
+    /// --no-reference,
     /// the image to measure.
     #[arg(value_name = "REF")]
     reference: PathBuf,
@@ -38,14 +38,7 @@ impl Loaded {
 }
 
 fn load(path: &Path) -> Result<Loaded, Failure> {
-    let named = |e: &dyn std::fmt::Display| Failure(format!("{}: {e}", path.display()));
-    let mut bytes = Vec::new();
-    io::open_input(path)
-        .and_then(|mut r| r.read_to_end(&mut bytes))
-        .map_err(|e| named(&e))?;
-    let img = image::load_from_memory(&bytes)
-        .map_err(|e| named(&e))?
-        .to_rgb8();
+    let img = image_io::open(path)?.to_rgb8();
     Ok(Loaded(img.width(), img.height(), img.into_raw()))
 }
 

@@ -1,17 +1,33 @@
 //! `gsi decode`: render a file to an image at any size.
 
 use crate::device::{self, DeviceArg};
+use crate::image_io::OutputFormat;
 use crate::{io, read_gsi, Failure};
 use gsi::format::Limits;
 use std::path::{Path, PathBuf};
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// The .gsi file (`-` for standard input).
-    file: PathBuf,
-    /// Output image, PNG or JPEG by extension (`-`: PNG on standard output).
+    /// The .gsi file (`-` for standard input). Several files, or a folder (its .gsi
+    /// files), make a batch: then OUTPUT is a folder, and each file is written there as
+    /// `<name>.<--format>`.
+    #[arg(required = true, value_name = "FILE")]
+    files: Vec<PathBuf>,
+    /// Output image by extension: .png, .jpg (quality 95), .webp (lossless) or .ppm (`-`:
+    /// PNG on standard output); or the folder of a batch.
     #[arg(short, long)]
     output: PathBuf,
+    /// In a batch, the format of the images written: png, jpg, webp or ppm.
+    #[arg(long, default_value = "png")]
+    format: String,
+    /// In a batch, decode again files whose output already exists and is a readable
+    /// image (by default they are skipped).
+    #[arg(long)]
+    force: bool,
+    /// In a batch, how many files are decoded at once (default: one per core, at most 4; one
+    /// on a GPU).
+    #[arg(long, value_name = "N")]
+    jobs: Option<usize>,
     /// Output width in pixels (height follows the aspect ratio unless given).
     #[arg(long, conflicts_with = "scale")]
     width: Option<u32>,
@@ -51,17 +67,59 @@ fn output_size(w: u32, h: u32, args: &Args) -> Result<(u32, u32), Failure> {
 }
 
 pub fn run(args: Args) -> Result<(), Failure> {
-    let f = read_gsi(&args.file)?;
+    if crate::batch::is_batch(&args.files, Some(&args.output)) {
+        return run_batch(&args);
+    }
+    // Input and output are checked before any rendering (or GPU start-up).
+    let (file, format) = (&args.files[0], OutputFormat::of(&args.output)?);
+    let f = read_gsi(file)?;
     let h = &f.records.header;
     let (w, ht) = output_size(h.width, h.height, &args)?;
     Limits::default().check_output(w, ht)?;
-    // Refuse an unsupported output format before any rendering (or GPU start-up).
-    let format = format_of(&args.output)?;
+    let gpu = device::open(args.device, "decoding", false)?;
+    decode_file(f, &args.output, format, &args, gpu.as_ref())
+}
+
+/// `gsi decode` of many files into the folder `args.output`.
+fn run_batch(args: &Args) -> Result<(), Failure> {
+    let format = OutputFormat::of(Path::new(&format!("x.{}", args.format)))?;
+    let files = crate::batch::expand(&args.files, &["gsi"])?;
+    let jobs = crate::batch::plan(files, &args.output, &args.format)?;
+    let gpu = device::open(args.device, "decoding", false)?;
+    let parallel = match (args.jobs, &gpu) {
+        (Some(0), _) => return Err(Failure("--jobs must be at least 1".into())),
+        (Some(n), _) => n,
+        (None, Some(_)) => 1,
+        (None, None) => crate::batch::default_parallel(),
+    };
+    let skip = |job: &crate::batch::Job| {
+        let readable = !args.force && image::image_dimensions(&job.output).is_ok();
+        readable.then(|| "an image is there (--force decodes it again)".to_string())
+    };
+    crate::batch::run(&jobs, parallel, false, skip, |job, _| {
+        let f = read_gsi(&job.input)?;
+        decode_file(f, &job.output, format, args, gpu.as_ref())
+            .map_err(|Failure(e)| Failure(format!("{}: {e}", job.input.display())))?;
+        Ok(format!("{}: written", job.output.display()))
+    })
+}
+
+/// Render `f` at the size `args` ask for and write it to `output` as `format`.
+fn decode_file(
+    f: gsi::format::GsiFile,
+    output: &Path,
+    format: OutputFormat,
+    args: &Args,
+    gpu: Option<&gsi::gpu::Gpu>,
+) -> Result<(), Failure> {
+    let h = &f.records.header;
+    let (w, ht) = output_size(h.width, h.height, args)?;
+    Limits::default().check_output(w, ht)?;
     let scene = f.records.to_scene();
     // On the CPU, tiles are blended a band at a time straight into the 8-bit output: 3
     // bytes per pixel in memory, not a float image and then an 8-bit copy.
     let cpu = |scene: &gsi::Scene| gsi::render::render_rgb8(scene, w, ht, &Limits::default());
-    let rgb = match device::open(args.device, "decoding", false)? {
+    let rgb = match gpu {
         None => cpu(&scene)?,
         Some(gpu) => match gpu.render(&scene, w, ht) {
             Ok(image) => image.to_rgb8(),
@@ -76,43 +134,6 @@ pub fn run(args: Args) -> Result<(), Failure> {
             Err(e) => return Err(e.into()),
         },
     };
-    let bytes = encode_image(&rgb, w, ht, format)?;
-    io::write_output(&args.output, &bytes)
-        .map_err(|e| Failure(format!("{}: {e}", args.output.display())))
-}
-
-/// What `gsi decode` writes.
-#[derive(Clone, Copy)]
-enum ImageFormat {
-    Png,
-    Jpeg,
-}
-
-/// PNG unless the output path ends in .jpg/.jpeg; other extensions are refused.
-fn format_of(path: &Path) -> Result<ImageFormat, Failure> {
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase);
-    match ext.as_deref() {
-        Some("jpg" | "jpeg") => Ok(ImageFormat::Jpeg),
-        None | Some("png") => Ok(ImageFormat::Png),
-        Some(other) => Err(Failure(format!(
-            "unsupported output format .{other} (use .png or .jpg)"
-        ))),
-    }
-}
-
-fn encode_image(rgb: &[u8], w: u32, h: u32, format: ImageFormat) -> Result<Vec<u8>, Failure> {
-    use image::ImageEncoder;
-    let mut out = Vec::new();
-    let color = image::ExtendedColorType::Rgb8;
-    match format {
-        ImageFormat::Jpeg => image::codecs::jpeg::JpegEncoder::new_with_quality(&mut out, 95)
-            .write_image(rgb, w, h, color)?,
-        ImageFormat::Png => {
-            image::codecs::png::PngEncoder::new(&mut out).write_image(rgb, w, h, color)?
-        }
-    }
-    Ok(out)
+    let bytes = format.encode(&rgb, w, ht)?;
+    io::write_output(output, &bytes).map_err(|e| Failure(format!("{}: {e}", output.display())))
 }

@@ -1,19 +1,31 @@
 //! `gsi encode`: fit Gaussians to an image and write a .gsi file.
 
 use crate::device::{self, DeviceArg};
-use crate::{io, Failure};
+use crate::{batch, image_io, io, Failure};
 use gsi::fit::{self, Budget, EncodeOptions, Init, Loss, Target};
 use gsi::model::Blend;
-use std::io::{IsTerminal, Read};
+use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// Input image: PNG, JPEG (8 or 16 bit; grey, RGB or RGBA). `-` reads standard input.
-    input: PathBuf,
-    /// Output .gsi file (`-` for standard output).
+    /// Input image: PNG, JPEG, BMP, TIFF, WebP or PNM (8 or 16 bit; grey, RGB or RGBA),
+    /// recognised by its bytes and turned upright by its EXIF orientation. `-` reads
+    /// standard input. Several files, or a folder (its image files), make a batch:
+    /// then OUTPUT is a folder, and each file is written there as `<name>.gsi`.
+    #[arg(required = true, value_name = "INPUT")]
+    inputs: Vec<PathBuf>,
+    /// Output .gsi file (`-` for standard output), or the folder of a batch.
     #[arg(short, long)]
     output: PathBuf,
+    /// In a batch, encode again files whose output already exists and is a valid .gsi
+    /// file (by default they are skipped).
+    #[arg(long)]
+    force: bool,
+    /// In a batch, how many files are encoded at once (default: one per core, at most 4; one
+    /// on a GPU).
+    #[arg(long, value_name = "N")]
+    jobs: Option<usize>,
     /// Number of Gaussians.
     #[arg(long, group = "budget")]
     gaussians: Option<usize>,
@@ -67,26 +79,11 @@ enum BlendArg {
     Alpha,
 }
 
-/// Load an image as RGB in `[0, 1]`, converting grey, alpha and 16-bit explicitly:
-/// grey is replicated, alpha is dropped (the image is taken as composited), 16-bit
-/// values are scaled by 1/65535.
+/// Load an image (any format [`image_io::open`] reads, upright) as RGB in `[0, 1]`,
+/// converting grey, alpha and 16-bit explicitly: grey is replicated, alpha is dropped (the
+/// image is taken as composited), 16-bit values are scaled by 1/65535.
 pub fn load_image(path: &Path) -> Result<Target, Failure> {
-    let named = |e: &dyn std::fmt::Display| Failure(format!("{}: {e}", path.display()));
-    let img = if path == Path::new("-") {
-        let mut bytes = Vec::new();
-        std::io::stdin()
-            .lock()
-            .read_to_end(&mut bytes)
-            .map_err(|e| named(&e))?;
-        image::load_from_memory(&bytes)
-    } else {
-        image::ImageReader::open(path)
-            .map_err(|e| named(&e))?
-            .with_guessed_format()
-            .map_err(|e| named(&e))?
-            .decode()
-    }
-    .map_err(|e| named(&e))?;
+    let img = image_io::open(path)?;
     let (width, height) = (img.width(), img.height());
     let data: Vec<f32> = if img.color().bytes_per_pixel() / img.color().channel_count() > 1 {
         img.into_rgb32f().into_raw()
@@ -104,8 +101,12 @@ pub fn load_image(path: &Path) -> Result<Target, Failure> {
     })
 }
 
-pub fn run(args: Args) -> Result<(), Failure> {
-    let target = load_image(&args.input)?;
+/// The image extensions a folder given as a batch's input is searched for.
+const IMAGE_EXTENSIONS: &[&str] = &[
+    "png", "jpg", "jpeg", "bmp", "tif", "tiff", "webp", "ppm", "pgm", "pnm",
+];
+
+fn options(args: &Args) -> Result<EncodeOptions, Failure> {
     let budget = match (args.gaussians, args.bpp, args.target_psnr) {
         (Some(n), _, _) => Budget::Gaussians(n),
         (_, Some(b), _) if b.is_finite() && b > 0.0 => Budget::Bpp(b),
@@ -117,7 +118,7 @@ pub fn run(args: Args) -> Result<(), Failure> {
     if args.iterations == 0 {
         return Err(Failure("--iterations must be at least 1".into()));
     }
-    let opts = EncodeOptions {
+    Ok(EncodeOptions {
         budget,
         iterations: args.iterations,
         init: match args.init {
@@ -134,7 +135,41 @@ pub fn run(args: Args) -> Result<(), Failure> {
             LossArg::L1MsSsim => Loss::L1MsSsim { lambda: 0.2 },
         },
         ..EncodeOptions::default()
-    };
+    })
+}
+
+/// Encode `target`, read from `input`, into `output`; the summary line.
+fn encode_file(
+    input: &Path,
+    target: &Target,
+    output: &Path,
+    opts: &EncodeOptions,
+    on: gsi::Device,
+    progress: &mut dyn FnMut(&fit::Progress),
+) -> Result<(fit::Encoded, String), Failure> {
+    let encoded = fit::encode(target, opts, on, progress)
+        .map_err(|e| Failure(format!("{}: {e}", input.display())))?;
+    io::write_output(output, &encoded.bytes)
+        .map_err(|e| Failure(format!("{}: {e}", output.display())))?;
+    let px = f64::from(target.width) * f64::from(target.height);
+    let bytes = encoded.bytes.len() as f64;
+    let summary = format!(
+        "N {}  {} bytes  {:.3} bpp  Cr {:.1}x  PSNR {:.2} dB",
+        encoded.records.header.count,
+        encoded.bytes.len(),
+        bytes * 8.0 / px,
+        3.0 * px / bytes,
+        encoded.psnr
+    );
+    Ok((encoded, summary))
+}
+
+pub fn run(args: Args) -> Result<(), Failure> {
+    let opts = options(&args)?;
+    if batch::is_batch(&args.inputs, Some(&args.output)) {
+        return run_batch(&args, &opts);
+    }
+    let input = &args.inputs[0];
     let show = !args.quiet && std::io::stderr().is_terminal();
     let bar = indicatif::ProgressBar::new(u64::from(args.iterations));
     if show {
@@ -150,26 +185,51 @@ pub fn run(args: Args) -> Result<(), Failure> {
         bar.set_position(u64::from(p.iteration));
         bar.set_message(format!("N {}  PSNR {:.2} dB", p.gaussians, p.psnr));
     };
+    // The image is read before the GPU starts: a bad input is refused at once.
+    let target = load_image(input)?;
     let gpu = device::open(args.device, "fitting", args.quiet)?;
     let on = gpu.as_ref().map_or(gsi::Device::Cpu, gsi::Device::Gpu);
-    let encoded = fit::encode(&target, &opts, on, &mut progress)?;
+    let (encoded, summary) = encode_file(input, &target, &args.output, &opts, on, &mut progress)?;
     bar.finish_and_clear();
-    if let (Some(why), false) = (&encoded.fallback, args.quiet) {
-        eprintln!("gsi: {why}");
-    }
-    io::write_output(&args.output, &encoded.bytes)
-        .map_err(|e| Failure(format!("{}: {e}", args.output.display())))?;
     if !args.quiet {
-        let px = f64::from(target.width) * f64::from(target.height);
-        let bytes = encoded.bytes.len() as f64;
-        eprintln!(
-            "N {}  {} bytes  {:.3} bpp  Cr {:.1}x  PSNR {:.2} dB",
-            encoded.records.header.count,
-            encoded.bytes.len(),
-            bytes * 8.0 / px,
-            3.0 * px / bytes,
-            encoded.psnr
-        );
+        if let Some(why) = &encoded.fallback {
+            eprintln!("gsi: {why}");
+        }
+        eprintln!("{summary}");
     }
     Ok(())
+}
+
+/// `gsi encode` of many files into the folder `args.output`.
+fn run_batch(args: &Args, opts: &EncodeOptions) -> Result<(), Failure> {
+    let inputs = batch::expand(&args.inputs, IMAGE_EXTENSIONS)?;
+    let jobs = batch::plan(inputs, &args.output, "gsi")?;
+    let gpu = device::open(args.device, "fitting", args.quiet)?;
+    let parallel = match (args.jobs, &gpu) {
+        (Some(0), _) => return Err(Failure("--jobs must be at least 1".into())),
+        (Some(n), _) => n,
+        (None, Some(_)) => 1,
+        (None, None) => batch::default_parallel(),
+    };
+    let skip = |job: &batch::Job| {
+        let valid = !args.force
+            && std::fs::File::open(&job.output).is_ok_and(|f| {
+                gsi::format::read_file(std::io::BufReader::new(f), gsi::format::Limits::default())
+                    .is_ok()
+            });
+        valid.then(|| "a valid .gsi file is there (--force encodes it again)".to_string())
+    };
+    batch::run(&jobs, parallel, args.quiet, skip, |job, report| {
+        let on = gpu.as_ref().map_or(gsi::Device::Cpu, gsi::Device::Gpu);
+        // The budget loops may add passes; the bar follows the iterations announced.
+        let mut progress = |p: &fit::Progress| report(p.iteration as f32 / p.total.max(1) as f32);
+        let target = load_image(&job.input)?;
+        let (encoded, summary) =
+            encode_file(&job.input, &target, &job.output, opts, on, &mut progress)?;
+        let fallback = encoded
+            .fallback
+            .map(|w| format!(" ({w})"))
+            .unwrap_or_default();
+        Ok(format!("{}: {summary}{fallback}", job.output.display()))
+    })
 }

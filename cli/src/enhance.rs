@@ -7,19 +7,26 @@ use gsi::enhance::{self, LOW_LIGHT_LUMA};
 use gsi::format::{ChunkType, ChunkedFile, Limits};
 use std::io::{IsTerminal, Read};
 use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
 
 #[derive(clap::Args)]
 #[command(group(clap::ArgGroup::new("dest").required(true).args(["in_place", "output"])))]
 #[command(group(clap::ArgGroup::new("mode").args(["revert", "apply_from"])))]
 pub struct Args {
-    /// The .gsi file to enhance (`-` reads standard input).
-    input: PathBuf,
+    /// The .gsi file to enhance (`-` reads standard input). Several files, or a folder
+    /// (its .gsi files), make a batch: enhanced in place, or written to the folder OUTPUT.
+    #[arg(required = true, value_name = "INPUT")]
+    inputs: Vec<PathBuf>,
     /// Replace the input file (through a synced temporary file in the same folder).
     #[arg(long)]
     in_place: bool,
-    /// Write the result here instead (`-` for standard output).
+    /// Write the result here instead (`-` for standard output), or in the folder of a batch.
     #[arg(short, long)]
     output: Option<PathBuf>,
+    /// In a batch, how many files are enhanced at once (default: one per core, at most 4; one
+    /// on a GPU).
+    #[arg(long, value_name = "N")]
+    jobs: Option<usize>,
     /// Optimizer iterations of the fit.
     #[arg(long, default_value_t = EnhanceOptions::default().iterations)]
     iterations: u32,
@@ -41,7 +48,8 @@ pub struct Args {
     #[arg(long, value_enum, default_value_t = DeviceArg::Auto)]
     device: DeviceArg,
     /// Enhance even an image that is not low-light, or one enhanced before whose
-    /// original colours were discarded.
+    /// original colours were discarded. In a batch, also enhance again the files that
+    /// carry an enhancement (in place) or whose output exists (by default skipped).
     #[arg(long)]
     force: bool,
     /// Undo an earlier enhancement, restoring the file byte for byte.
@@ -78,11 +86,54 @@ fn parse(path: &Path, bytes: &[u8]) -> Result<ChunkedFile, Failure> {
 }
 
 pub fn run(args: Args) -> Result<(), Failure> {
-    if args.in_place && args.input == Path::new("-") {
+    check(&args)?;
+    if crate::batch::is_batch(&args.inputs, args.output.as_deref()) {
+        return run_batch(&args);
+    }
+    let input = &args.inputs[0];
+    if args.in_place && input == Path::new("-") {
         return Err(Failure(
             "--in-place needs a file, not standard input".into(),
         ));
     }
+    let dest = args.output.clone().unwrap_or_else(|| input.clone());
+    let show = !args.quiet && std::io::stderr().is_terminal();
+    let bar = indicatif::ProgressBar::new(u64::from(args.iterations));
+    if show {
+        bar.set_style(
+            indicatif::ProgressStyle::with_template("{bar:30} {pos}/{len} it  {msg}  ETA {eta}")
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+    } else {
+        bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
+    }
+    let mut progress = |p: &gsi::enhance::fit::Progress| {
+        bar.set_position(u64::from(p.iteration));
+        if args.verbose && (p.iteration % 50 == 0 || p.iteration == p.iterations) {
+            let (t, m) = (&p.terms, &p.map);
+            bar.suspend(|| {
+                eprintln!(
+                    "it {:>5}  total {:.4}  exposure {:.4}  hue {:.4}  spatial {:.4}  colour {:.4}  contrast {:.4}  tv {:.2e}  entropy {:.3}",
+                    p.iteration, t.total, t.exposure, t.hue, t.spatial, t.colour, t.contrast, m.tv, m.entropy
+                )
+            });
+        }
+        if p.iteration % 10 == 0 {
+            bar.set_message(format!("loss {:.3}", p.terms.total));
+        }
+    };
+    let lines = enhance_file(&args, input, &dest, &OnceLock::new(), &mut progress);
+    bar.finish_and_clear();
+    for line in lines? {
+        if !args.quiet {
+            eprintln!("{line}");
+        }
+    }
+    Ok(())
+}
+
+/// The options' own checks, before any file is read.
+fn check(args: &Args) -> Result<(), Failure> {
     if args.iterations == 0 {
         return Err(Failure("--iterations must be at least 1".into()));
     }
@@ -99,17 +150,89 @@ pub fn run(args: Args) -> Result<(), Failure> {
             args.experts
         )));
     }
-    let dest = args.output.clone().unwrap_or_else(|| args.input.clone());
-    let named = |e: gsi::format::Error| Failure(format!("{}: {e}", args.input.display()));
-    let limits = Limits::default();
-    let bytes = read_all(&args.input)?;
-    let file = parse(&args.input, &bytes)?;
-    let keep = !args.discard_original;
-    let say = |msg: String| {
-        if !args.quiet {
-            eprintln!("{msg}");
+    if !(args.learning_rate.is_finite() && args.learning_rate > 0.0) {
+        return Err(Failure(format!(
+            "--learning-rate {} must be positive",
+            args.learning_rate
+        )));
+    }
+    options(args).map(|_| ())
+}
+
+/// `gsi enhance` of many files, in place or into the folder `args.output`.
+fn run_batch(args: &Args) -> Result<(), Failure> {
+    let files = crate::batch::expand(&args.inputs, &["gsi"])?;
+    let jobs = match &args.output {
+        Some(dir) => crate::batch::plan(files, dir, "gsi")?,
+        None => files
+            .into_iter()
+            .map(|f| crate::batch::Job {
+                output: f.clone(),
+                input: f,
+            })
+            .collect(),
+    };
+    let fits = !args.revert && args.apply_from.is_none();
+    let gpu = OnceLock::new();
+    if fits {
+        device(args, &gpu)?;
+    }
+    let parallel = match (args.jobs, gpu.get().and_then(Option::as_ref)) {
+        (Some(0), _) => return Err(Failure("--jobs must be at least 1".into())),
+        (Some(n), _) => n,
+        (None, Some(_)) => 1,
+        (None, None) => crate::batch::default_parallel(),
+    };
+    let skip = |job: &crate::batch::Job| {
+        if args.force || args.revert || args.apply_from.is_some() {
+            return None;
+        }
+        let bytes = std::fs::read(&job.output).ok()?;
+        let file = ChunkedFile::parse(&bytes, Limits::default()).ok()?;
+        let enhanced = file.chunks.iter().any(|c| c.ty == ChunkType::ENHANCER);
+        match (args.in_place, enhanced) {
+            (true, true) => Some("enhanced before (--force enhances it again)".to_string()),
+            (true, false) => None,
+            (false, _) => Some("a valid .gsi file is there (--force enhances again)".to_string()),
         }
     };
+    crate::batch::run(&jobs, parallel, args.quiet, skip, |job, report| {
+        let iterations = args.iterations.max(1) as f32;
+        let mut progress =
+            |p: &gsi::enhance::fit::Progress| report(p.iteration as f32 / iterations);
+        let lines = enhance_file(args, &job.input, &job.output, &gpu, &mut progress)?;
+        Ok(lines.join("; "))
+    })
+}
+
+/// The device a fit runs on, opened the first time one is asked for: a file that needs
+/// no fit starts no GPU.
+fn device<'g>(
+    args: &Args,
+    cell: &'g OnceLock<Option<gsi::gpu::Gpu>>,
+) -> Result<Option<&'g gsi::gpu::Gpu>, Failure> {
+    if let Some(gpu) = cell.get() {
+        return Ok(gpu.as_ref());
+    }
+    let opened = crate::device::open(args.device, "enhancing", args.quiet)?;
+    Ok(cell.get_or_init(|| opened).as_ref())
+}
+
+/// Enhance (or revert, or apply an enhancer to) `input`, writing `dest`; the lines to
+/// tell the user. A fit runs on [`device`]`(args, gpu)`.
+fn enhance_file(
+    args: &Args,
+    input: &Path,
+    dest: &Path,
+    gpu: &OnceLock<Option<gsi::gpu::Gpu>>,
+    progress: &mut dyn FnMut(&gsi::enhance::fit::Progress),
+) -> Result<Vec<String>, Failure> {
+    let named = |e: gsi::format::Error| Failure(format!("{}: {e}", input.display()));
+    let limits = Limits::default();
+    let bytes = read_all(input)?;
+    let file = parse(input, &bytes)?;
+    let keep = !args.discard_original;
+    let mut lines = Vec::new();
 
     let out = if args.revert {
         file.revert().map_err(named)?
@@ -121,91 +244,32 @@ pub fn run(args: Args) -> Result<(), Failure> {
         if enhanced_before && file.original().map_err(named)?.is_none() && !args.force {
             return Err(Failure(format!(
                 "{}: already enhanced and its original colours were discarded; --force enhances the enhanced colours again",
-                args.input.display()
+                input.display()
             )));
         }
-        let weights = match &args.weights {
-            None => EnhanceOptions::default().weights,
-            Some(w) if w.len() == 7 && w.iter().all(|x| x.is_finite() && *x >= 0.0) => {
-                let mut a = [0.0; 7];
-                a.copy_from_slice(w);
-                gsi::enhance::loss::LossWeights::from_array(a)
-            }
-            Some(w) => {
-                return Err(Failure(format!(
-                    "--weights {w:?}: seven finite, non-negative numbers are needed"
-                )))
-            }
-        };
-        if !(args.learning_rate.is_finite() && args.learning_rate > 0.0) {
-            return Err(Failure(format!(
-                "--learning-rate {} must be positive",
-                args.learning_rate
-            )));
-        }
-        let opts = EnhanceOptions {
-            weights,
-            learning_rate: args.learning_rate,
-            iterations: args.iterations,
-            experts: args.experts,
-            seed: args.seed,
-            params: gsi::enhance::loss::LossParams {
-                exposure_target: args.exposure,
-                ..EnhanceOptions::default().params
-            },
-            ..EnhanceOptions::default()
-        };
+        let opts = options(args)?;
         let scene = enhance::base_records(&file, &limits)
             .map_err(named)?
             .to_scene();
         let luma = scene_luma(&scene, opts.work_side);
         if luma > LOW_LIGHT_LUMA && !args.force {
-            say(format!(
+            lines.push(format!(
                 "{}: mean luma {luma:.3} is above {LOW_LIGHT_LUMA}: not a low-light image, left unchanged (--force enhances it anyway)",
-                args.input.display()
+                input.display()
             ));
-            if args.output.is_some() {
-                write(&dest, &bytes)?;
+            if dest != input {
+                write(dest, &bytes)?;
             }
-            return Ok(());
+            return Ok(lines);
         }
-        let show = !args.quiet && std::io::stderr().is_terminal();
-        let bar = indicatif::ProgressBar::new(u64::from(args.iterations));
-        if show {
-            bar.set_style(
-                indicatif::ProgressStyle::with_template(
-                    "{bar:30} {pos}/{len} it  {msg}  ETA {eta}",
-                )
-                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-            );
-        } else {
-            bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
-        }
-        let gpu = crate::device::open(args.device, "enhancing", args.quiet)?;
+        let on = device(args, gpu)?.map_or(gsi::Device::Cpu, gsi::Device::Gpu);
         let start = std::time::Instant::now();
-        let mut progress = |p: &gsi::enhance::fit::Progress| {
-            bar.set_position(u64::from(p.iteration));
-            if args.verbose && (p.iteration % 50 == 0 || p.iteration == p.iterations) {
-                let (t, m) = (&p.terms, &p.map);
-                bar.suspend(|| {
-                    eprintln!(
-                        "it {:>5}  total {:.4}  exposure {:.4}  hue {:.4}  spatial {:.4}  colour {:.4}  contrast {:.4}  tv {:.2e}  entropy {:.3}",
-                        p.iteration, t.total, t.exposure, t.hue, t.spatial, t.colour, t.contrast, m.tv, m.entropy
-                    )
-                });
-            }
-            if p.iteration % 10 == 0 {
-                bar.set_message(format!("loss {:.3}", p.terms.total));
-            }
-        };
-        let on = gpu.as_ref().map_or(gsi::Device::Cpu, gsi::Device::Gpu);
         let (out, fitted) =
-            enhance::enhance(&file, &opts, keep, &limits, on, &mut progress).map_err(named)?;
-        bar.finish_and_clear();
+            enhance::enhance(&file, &opts, keep, &limits, on, progress).map_err(named)?;
         if let Some(why) = &fitted.fallback {
-            say(format!("gsi: {why}"));
+            lines.push(format!("gsi: {why}"));
         }
-        say(format!(
+        lines.push(format!(
             "enhanced: mean luma {:.3} -> {:.3}, K {}, {} iterations, {:.1} s",
             fitted.mean_luma.0,
             fitted.mean_luma.1,
@@ -215,9 +279,38 @@ pub fn run(args: Args) -> Result<(), Failure> {
         ));
         out
     };
-    write(&dest, &out)?;
-    say(format!("{}: {} bytes", dest.display(), out.len()));
-    Ok(())
+    write(dest, &out)?;
+    lines.push(format!("{}: {} bytes", dest.display(), out.len()));
+    Ok(lines)
+}
+
+/// The fit's options from the command line.
+fn options(args: &Args) -> Result<EnhanceOptions, Failure> {
+    let weights = match &args.weights {
+        None => EnhanceOptions::default().weights,
+        Some(w) if w.len() == 7 && w.iter().all(|x| x.is_finite() && *x >= 0.0) => {
+            let mut a = [0.0; 7];
+            a.copy_from_slice(w);
+            gsi::enhance::loss::LossWeights::from_array(a)
+        }
+        Some(w) => {
+            return Err(Failure(format!(
+                "--weights {w:?}: seven finite, non-negative numbers are needed"
+            )))
+        }
+    };
+    Ok(EnhanceOptions {
+        weights,
+        learning_rate: args.learning_rate,
+        iterations: args.iterations,
+        experts: args.experts,
+        seed: args.seed,
+        params: gsi::enhance::loss::LossParams {
+            exposure_target: args.exposure,
+            ..EnhanceOptions::default().params
+        },
+        ..EnhanceOptions::default()
+    })
 }
 
 fn write(dest: &Path, bytes: &[u8]) -> Result<(), Failure> {

@@ -1,11 +1,13 @@
 //! `gsi`: the command-line front end. Exit status: 0 success, 1 invalid input or a
 //! failed operation (one line on stderr naming the problem), 2 usage error.
 
+mod batch;
 mod compare;
 mod decode;
 mod device;
 mod encode;
 mod enhance;
+mod image_io;
 mod info;
 mod io;
 
@@ -31,7 +33,7 @@ enum Command {
     Enhance(enhance::Args),
     /// Describe a .gsi file: size, Gaussians, compression figures, chunks.
     Info(info::Args),
-    /// Render a .gsi file to PNG or JPEG at any size.
+    /// Render a .gsi file to PNG, JPEG, WebP or PPM at any size.
     Decode(decode::Args),
     /// Compare an image with a reference: PSNR, SSIM, MS-SSIM, GT-mean variants, LOE, DE, EME.
     Compare(compare::Args),

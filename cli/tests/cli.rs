@@ -453,3 +453,302 @@ fn an_enlarged_header_decodes_at_its_size() {
     assert_eq!((img.width(), img.height()), (3000, 2000));
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// The test image of [`write_png`] as pixels.
+fn test_pixels(w: u32, h: u32) -> image::DynamicImage {
+    let mut rgb = Vec::new();
+    for y in 0..h {
+        for x in 0..w {
+            rgb.extend([
+                (x * 255 / w) as u8,
+                (y * 255 / h) as u8,
+                ((x * y) % 200) as u8,
+            ]);
+        }
+    }
+    image::DynamicImage::ImageRgb8(image::RgbImage::from_raw(w, h, rgb).unwrap())
+}
+
+/// Encode `input` with a small fixed budget; the file's bytes.
+fn encode_small(input: &Path, output: &Path) -> Vec<u8> {
+    let out = gsi(&[
+        "encode",
+        input.to_str().unwrap(),
+        "-o",
+        output.to_str().unwrap(),
+        "--gaussians",
+        "30",
+        "--iterations",
+        "8",
+        "--quiet",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}: {}",
+        input.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    std::fs::read(output).unwrap()
+}
+
+/// The formats users bring (the LIME set is BMP; scanners write TIFF; the web WebP; tools
+/// PNM) are read by their bytes, whatever the name says: the same pixels in any lossless
+/// format give the same .gsi file, bit for bit, as the PNG does. Grey files are read as
+/// grey replicated, 16-bit ones at 16 bits.
+#[test]
+fn encode_reads_the_formats_people_have() {
+    let dir = tmp_dir("formats");
+    let img = test_pixels(36, 20);
+    let png = dir.join("ref.png");
+    img.save(&png).unwrap();
+    let reference = encode_small(&png, &dir.join("ref.gsi"));
+    for ext in ["bmp", "tiff", "webp", "ppm"] {
+        let path = dir.join(format!("a.{ext}"));
+        img.save(&path).unwrap();
+        let got = encode_small(&path, &dir.join(format!("{ext}.gsi")));
+        assert!(got == reference, "{ext} did not read as the PNG's pixels");
+        // Named wrongly, read by content.
+        let misnamed = dir.join(format!("{ext}-as.png"));
+        std::fs::copy(&path, &misnamed).unwrap();
+        let got = encode_small(&misnamed, &dir.join(format!("{ext}-as.gsi")));
+        assert!(got == reference, "{ext} named .png did not read by content");
+    }
+    // 16-bit and grey: TIFF against PNG of the same samples.
+    let deep = image::DynamicImage::ImageRgb16(img.to_rgb16());
+    let grey = image::DynamicImage::ImageLuma8(img.to_luma8());
+    for (name, pixels) in [("rgb16", deep), ("grey8", grey)] {
+        let (p, t) = (
+            dir.join(format!("{name}.png")),
+            dir.join(format!("{name}.tif")),
+        );
+        pixels.save(&p).unwrap();
+        pixels.save(&t).unwrap();
+        let a = encode_small(&p, &dir.join(format!("{name}-png.gsi")));
+        let b = encode_small(&t, &dir.join(format!("{name}-tif.gsi")));
+        assert!(a == b, "{name}: TIFF and PNG differ");
+    }
+    // A format gsi does not read is refused by name, with what it does read.
+    let gif = dir.join("a.gif");
+    std::fs::write(&gif, b"GIF89a\x01\x00\x01\x00\x00\x00\x00;").unwrap();
+    let out = gsi(&["encode", gif.to_str().unwrap(), "-o", "x.gsi"]);
+    assert_refused(&out, "gif");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("a.gif") && err.contains("BMP"), "{err}");
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+/// A photograph taken with the phone turned is stored sideways with an EXIF orientation;
+/// it is fitted upright, as every viewer shows it: the file is the one the rotated pixels
+/// give.
+#[test]
+fn encode_applies_the_exif_orientation() {
+    use image::ImageEncoder;
+    let dir = tmp_dir("orientation");
+    let img = test_pixels(30, 18);
+    // Orientation 6: the stored pixels are shown turned 90° clockwise.
+    let exif: Vec<u8> = [
+        &b"MM\x00\x2a\x00\x00\x00\x08"[..],
+        &[0x00, 0x01],                                     // one entry
+        &[0x01, 0x12, 0x00, 0x03, 0, 0, 0, 1, 0, 6, 0, 0], // Orientation, SHORT, 1, 6
+        &[0, 0, 0, 0],                                     // no next IFD
+    ]
+    .concat();
+    let sideways = dir.join("sideways.png");
+    let mut bytes = Vec::new();
+    let mut enc = image::codecs::png::PngEncoder::new(&mut bytes);
+    enc.set_exif_metadata(exif).unwrap();
+    enc.write_image(img.as_bytes(), 30, 18, image::ExtendedColorType::Rgb8)
+        .unwrap();
+    std::fs::write(&sideways, bytes).unwrap();
+    let upright = dir.join("upright.png");
+    img.rotate90().save(&upright).unwrap();
+    let a = encode_small(&sideways, &dir.join("sideways.gsi"));
+    let b = encode_small(&upright, &dir.join("upright.gsi"));
+    assert!(a == b, "the orientation was not applied");
+    let info = gsi(&["info", "--json", dir.join("sideways.gsi").to_str().unwrap()]);
+    let j: serde_json::Value = serde_json::from_slice(&info.stdout).unwrap();
+    assert_eq!(
+        (j["width"].as_u64(), j["height"].as_u64()),
+        (Some(18), Some(30))
+    );
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+/// `gsi decode` writes PNG, JPEG, WebP (lossless) and PPM by extension: the lossless ones
+/// hold the PNG's pixels exactly, the JPEG is close to them.
+#[test]
+fn decode_writes_png_jpeg_webp_and_ppm() {
+    let dir = tmp_dir("decode-formats");
+    let file = corpus("valid")
+        .into_iter()
+        .find(|p| p.extension().is_some_and(|e| e == "gsi"))
+        .unwrap();
+    let decode = |ext: &str| {
+        let out = dir.join(format!("out.{ext}"));
+        let r = gsi(&[
+            "decode",
+            file.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        assert!(
+            r.status.success(),
+            "{ext}: {}",
+            String::from_utf8_lossy(&r.stderr)
+        );
+        let bytes = std::fs::read(&out).unwrap();
+        let format = image::guess_format(&bytes).unwrap();
+        (format, image::load_from_memory(&bytes).unwrap().to_rgb8())
+    };
+    let (format, png) = decode("png");
+    assert_eq!(format, image::ImageFormat::Png);
+    for (ext, want) in [
+        ("webp", image::ImageFormat::WebP),
+        ("ppm", image::ImageFormat::Pnm),
+        ("PNM", image::ImageFormat::Pnm),
+    ] {
+        let (format, img) = decode(ext);
+        assert_eq!(format, want, "{ext}");
+        assert!(img == png, "{ext}: not the PNG's pixels");
+    }
+    let (format, jpeg) = decode("jpg");
+    assert_eq!(format, image::ImageFormat::Jpeg);
+    let err: f64 = jpeg
+        .as_raw()
+        .iter()
+        .zip(png.as_raw())
+        .map(|(&a, &b)| (f64::from(a) - f64::from(b)).powi(2))
+        .sum::<f64>()
+        / png.as_raw().len() as f64;
+    assert!(err < 25.0, "JPEG mean squared error {err}");
+    let bad = dir.join("out.gif");
+    assert_refused(
+        &gsi(&[
+            "decode",
+            file.to_str().unwrap(),
+            "-o",
+            bad.to_str().unwrap(),
+        ]),
+        "gif output",
+    );
+    assert!(!bad.exists());
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+/// Many files in one call: a folder in, a folder out. Each output is the file a call of
+/// its own writes; a corrupt input is reported by name while the others are written, and
+/// the exit status says one failed; outputs already there are skipped unless `--force`;
+/// two inputs that would write one output are refused before any work.
+#[test]
+fn batches_of_files_in_one_call() {
+    let dir = tmp_dir("batch");
+    let (inputs, out) = (dir.join("in"), dir.join("out"));
+    std::fs::create_dir_all(&inputs).unwrap();
+    for (k, name) in ["a.png", "b.bmp", "c.tiff"].iter().enumerate() {
+        test_pixels(20 + 4 * k as u32, 14)
+            .save(inputs.join(name))
+            .unwrap();
+    }
+    std::fs::write(inputs.join("broken.png"), b"\x89PNG\r\n\x1a\n not really").unwrap();
+    std::fs::write(inputs.join("notes.txt"), b"not an image, not looked at").unwrap();
+    let small = ["--gaussians", "30", "--iterations", "8"];
+    let run = |args: &[&str]| gsi(&[&["encode"][..], args, &small[..]].concat());
+    let (i, o) = (inputs.to_str().unwrap(), format!("{}/", out.display()));
+    let batch = run(&[i, "-o", &o, "--jobs", "2"]);
+    let err = String::from_utf8_lossy(&batch.stderr);
+    assert_eq!(batch.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("broken.png") && err.contains("1 of 4 files failed"),
+        "{err}"
+    );
+    for name in ["a", "b", "c"] {
+        let single = dir.join(format!("{name}-single.gsi"));
+        let input = std::fs::read_dir(&inputs)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .find(|p| p.file_stem().unwrap() == name)
+            .unwrap();
+        let got = encode_small(&input, &single);
+        let batched = std::fs::read(out.join(format!("{name}.gsi"))).unwrap();
+        assert!(got == batched, "{name}: the batch wrote another file");
+    }
+    assert!(!out.join("notes.gsi").exists() && !out.join("broken.gsi").exists());
+    // Again: the valid outputs are skipped (their files untouched), the broken one fails.
+    let a = out.join("a.gsi");
+    std::fs::write(&a, b"GSI? no: not valid").unwrap();
+    let b_time = std::fs::metadata(out.join("b.gsi"))
+        .unwrap()
+        .modified()
+        .unwrap();
+    let again = run(&[i, "-o", &o]);
+    let err = String::from_utf8_lossy(&again.stderr);
+    assert_eq!(again.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("b.gsi: skipped") && err.contains("c.gsi: skipped"),
+        "{err}"
+    );
+    assert!(
+        !err.contains("a.gsi: skipped"),
+        "an invalid output was kept: {err}"
+    );
+    assert!(
+        std::fs::read(&a).unwrap().starts_with(b"\x89GSI"),
+        "a.gsi not rewritten"
+    );
+    let b_again = std::fs::metadata(out.join("b.gsi"))
+        .unwrap()
+        .modified()
+        .unwrap();
+    assert_eq!(b_time, b_again);
+    let forced = run(&[i, "-o", &o, "--force", "--quiet"]);
+    assert_eq!(forced.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&forced.stderr);
+    assert!(
+        !err.contains("skipped") && err.contains("broken.png"),
+        "{err}"
+    );
+    // Decode the folder: each image is the one a single decode writes.
+    let images = dir.join("images");
+    let dec = gsi(&[
+        "decode",
+        out.to_str().unwrap(),
+        "-o",
+        images.to_str().unwrap(),
+        "--format",
+        "webp",
+    ]);
+    assert!(
+        dec.status.success(),
+        "{}",
+        String::from_utf8_lossy(&dec.stderr)
+    );
+    for name in ["a", "b", "c"] {
+        let single = dir.join(format!("{name}.png"));
+        let gsi_file = out.join(format!("{name}.gsi"));
+        let r = gsi(&[
+            "decode",
+            gsi_file.to_str().unwrap(),
+            "-o",
+            single.to_str().unwrap(),
+        ]);
+        assert!(r.status.success());
+        let want = image::open(&single).unwrap().to_rgb8();
+        let got = image::open(images.join(format!("{name}.webp")))
+            .unwrap()
+            .to_rgb8();
+        assert!(want == got, "{name}: the batch decoded another image");
+    }
+    // Two inputs named alike would overwrite each other: refused before any work.
+    let clash = dir.join("clash");
+    let twice = run(&[
+        inputs.join("a.png").to_str().unwrap(),
+        inputs.join("a.png").to_str().unwrap(),
+        "-o",
+        clash.to_str().unwrap(),
+    ]);
+    assert_refused(&twice, "clash");
+    assert!(std::fs::read_dir(&clash).unwrap().next().is_none());
+    // Standard input has no name to write under.
+    assert_refused(&run(&["-", i, "-o", &o]), "stdin in a batch");
+    std::fs::remove_dir_all(dir).unwrap();
+}

@@ -387,3 +387,79 @@ fn cli_works_in_a_pipe_and_refuses_bad_usage() {
     assert_eq!(out.status.code(), Some(1));
     assert_eq!(std::fs::read(&junk).unwrap(), b"not a gsi file");
 }
+
+/// `gsi enhance --in-place` over a folder: every file is the one a call of its own
+/// writes; a file enhanced before is skipped unless `--force`; a corrupt one is reported
+/// while the rest are done, and the exit status says so.
+#[test]
+fn cli_batch_in_place() {
+    let dir = tmp("batch");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let files: Vec<_> = (0..3)
+        .map(|k| {
+            let path = dir.join(format!("f{k}.gsi"));
+            std::fs::write(&path, dark_file(20 + k, 40, Blend::Sum, 0.15)).unwrap();
+            path
+        })
+        .collect();
+    std::fs::write(dir.join("broken.gsi"), b"\x89GSI\r\n\x1a\n truncated").unwrap();
+    let quick = ["--iterations", "6", "--jobs", "2"];
+    // Each alone, into copies: what the batch must write.
+    let want: Vec<Vec<u8>> = files
+        .iter()
+        .map(|f| {
+            let single = f.with_extension("single");
+            let out = gsi(&[
+                "enhance",
+                f.to_str().unwrap(),
+                "-o",
+                single.to_str().unwrap(),
+                "--iterations",
+                "6",
+                "--quiet",
+            ]);
+            assert!(
+                out.status.success(),
+                "{}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+            let bytes = std::fs::read(&single).unwrap();
+            std::fs::remove_file(single).unwrap();
+            bytes
+        })
+        .collect();
+    let d = dir.to_str().unwrap();
+    let out = gsi(&[&["enhance", d, "--in-place"][..], &quick[..]].concat());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("broken.gsi") && err.contains("1 of 4 files failed"),
+        "{err}"
+    );
+    for (f, want) in files.iter().zip(&want) {
+        assert!(&std::fs::read(f).unwrap() == want, "{}", f.display());
+    }
+    // Again: the enhanced files are skipped, untouched.
+    let out = gsi(&[&["enhance", d, "--in-place"][..], &quick[..]].concat());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(err.matches("skipped, enhanced before").count(), 3, "{err}");
+    for (f, want) in files.iter().zip(&want) {
+        assert!(&std::fs::read(f).unwrap() == want, "{}", f.display());
+    }
+    // Reverted as a batch: the stage-1 files come back.
+    std::fs::remove_file(dir.join("broken.gsi")).unwrap();
+    let out = gsi(&["enhance", d, "--in-place", "--revert", "--quiet"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for (k, f) in files.iter().enumerate() {
+        assert_eq!(
+            std::fs::read(f).unwrap(),
+            dark_file(20 + k as u64, 40, Blend::Sum, 0.15)
+        );
+    }
+    std::fs::remove_dir_all(dir).unwrap();
+}

@@ -1,0 +1,103 @@
+//! Images in and out of the CLI, through the `image` crate: the formats users bring
+//! (PNG, JPEG, BMP, TIFF, WebP, PNM; 8 or 16 bit; grey, RGB, RGBA), read by content rather
+//! than by name and turned upright by their EXIF orientation, and the formats
+//! `gsi decode` writes. The library's lean decoder knows none of this.
+
+use crate::{io, Failure};
+use image::{DynamicImage, ImageDecoder, ImageReader};
+use std::io::{Cursor, Read};
+use std::path::Path;
+
+/// The formats [`open`] reads, for error messages.
+const READS: &str = "PNG, JPEG, BMP, TIFF, WebP or PNM";
+
+/// Read the image at `path` (`-`: standard input) in whatever format its bytes are,
+/// upright: an EXIF orientation (JPEG, PNG, TIFF and WebP carry one) is applied, as
+/// viewers do, so that a phone photograph is fitted the way it is seen. Decoding is
+/// bounded by the `image` crate's default limits (512 MiB per allocation).
+pub fn open(path: &Path) -> Result<DynamicImage, Failure> {
+    let named = |e: &dyn std::fmt::Display| Failure(format!("{}: {e}", path.display()));
+    let reader = if path == Path::new("-") {
+        let mut bytes = Vec::new();
+        io::open_input(path)
+            .and_then(|mut r| r.read_to_end(&mut bytes))
+            .map_err(|e| named(&e))?;
+        ImageReader::new(Box::new(Cursor::new(bytes)) as Box<dyn ReadSeek>)
+    } else {
+        let file = std::fs::File::open(path).map_err(|e| named(&e))?;
+        ImageReader::new(Box::new(std::io::BufReader::new(file)) as Box<dyn ReadSeek>)
+    };
+    let reader = reader.with_guessed_format().map_err(|e| named(&e))?;
+    if reader.format().is_none() {
+        return Err(named(&format_args!("not an image gsi reads ({READS})")));
+    }
+    let described = |e: image::ImageError| match e {
+        image::ImageError::Unsupported(u) => named(&format_args!("{u} (gsi reads {READS})")),
+        other => named(&other),
+    };
+    let mut decoder = reader.into_decoder().map_err(described)?;
+    // An unreadable orientation tag is no reason to refuse the pixels.
+    let orientation = decoder
+        .orientation()
+        .unwrap_or(image::metadata::Orientation::NoTransforms);
+    let mut img = DynamicImage::from_decoder(decoder).map_err(described)?;
+    img.apply_orientation(orientation);
+    Ok(img)
+}
+
+/// A seekable reader, for the decoders that need to seek (TIFF).
+trait ReadSeek: std::io::BufRead + std::io::Seek {}
+impl<T: std::io::BufRead + std::io::Seek> ReadSeek for T {}
+
+/// What `gsi decode` writes, chosen by the output's extension.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum OutputFormat {
+    Png,
+    /// Baseline JPEG at quality 95.
+    Jpeg,
+    /// Lossless WebP (the `image` crate's encoder writes no lossy WebP).
+    WebP,
+    /// Binary PPM (P6).
+    Pnm,
+}
+
+impl OutputFormat {
+    /// The format for `path`: by extension, PNG where there is none (and for `-`).
+    pub fn of(path: &Path) -> Result<OutputFormat, Failure> {
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase);
+        match ext.as_deref() {
+            None | Some("png") => Ok(OutputFormat::Png),
+            Some("jpg" | "jpeg") => Ok(OutputFormat::Jpeg),
+            Some("webp") => Ok(OutputFormat::WebP),
+            Some("ppm" | "pnm") => Ok(OutputFormat::Pnm),
+            Some(other) => Err(Failure(format!(
+                "unsupported output format .{other} (use .png, .jpg, .webp or .ppm)"
+            ))),
+        }
+    }
+
+    /// `rgb` (8-bit RGB, `w`×`h`) in this format.
+    pub fn encode(self, rgb: &[u8], w: u32, h: u32) -> Result<Vec<u8>, Failure> {
+        use image::ImageEncoder;
+        let mut out = Vec::new();
+        let color = image::ExtendedColorType::Rgb8;
+        match self {
+            OutputFormat::Png => {
+                image::codecs::png::PngEncoder::new(&mut out).write_image(rgb, w, h, color)?
+            }
+            OutputFormat::Jpeg => image::codecs::jpeg::JpegEncoder::new_with_quality(&mut out, 95)
+                .write_image(rgb, w, h, color)?,
+            OutputFormat::WebP => image::codecs::webp::WebPEncoder::new_lossless(&mut out)
+                .write_image(rgb, w, h, color)?,
+            OutputFormat::Pnm => image::codecs::pnm::PnmEncoder::new(&mut out)
+                .with_subtype(image::codecs::pnm::PnmSubtype::Pixmap(
+                    image::codecs::pnm::SampleEncoding::Binary,
+                ))
+                .write_image(rgb, w, h, color)?,
+        }
+        Ok(out)
+    }
+}
