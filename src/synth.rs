@@ -399,6 +399,17 @@ mod corpus {
             );
             assemble(&p)
         }));
+        // Stage 2's chunks may each appear once (spec §2.4), though a renderer does not
+        // parse them.
+        for (ty, what) in [
+            (ChunkType::ENHANCER, "duplicate-genh"),
+            (ChunkType::ORIGINAL_COLORS, "duplicate-gorc"),
+        ] {
+            let mut p = chunks(&enhanced(&base));
+            let at = p.iter().position(|(t, _)| *t == ty).expect("stage-2 chunk");
+            p.insert(at, p[at].clone());
+            files.push((K::ChunkOrder, what, assemble(&p)));
+        }
         files.push((K::ChunkOrder, "duplicate-ghdr", {
             let mut p = parts.clone();
             p.insert(1, parts[0].clone());

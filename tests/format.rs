@@ -249,3 +249,120 @@ fn unknown_chunks_follow_their_criticality() {
     let e = format::read_file(&b[..], Limits::default()).unwrap_err();
     assert_eq!(e.kind(), ErrorKind::UnknownCriticalChunk);
 }
+
+/// `bytes` with the payload of every chunk of type `ty` replaced by `f(payload)` (CRC
+/// recomputed), and `extra` chunks inserted before `GEND`.
+fn rewrite(
+    bytes: &[u8],
+    ty: ChunkType,
+    f: impl Fn(&[u8]) -> Vec<u8>,
+    extra: &[(ChunkType, Vec<u8>)],
+) -> Vec<u8> {
+    let file = format::ChunkedFile::parse(bytes, Limits::default()).unwrap();
+    let mut out = bytes[..8].to_vec();
+    for c in &file.chunks {
+        if c.ty == ChunkType::END {
+            for (t, d) in extra {
+                put_chunk(&mut out, *t, d);
+            }
+        }
+        let data = if c.ty == ty {
+            f(&c.data)
+        } else {
+            c.data.clone()
+        };
+        put_chunk(&mut out, c.ty, &data);
+    }
+    out
+}
+
+/// Append one framed chunk (§2.2).
+fn put_chunk(out: &mut Vec<u8>, ty: ChunkType, data: &[u8]) {
+    out.extend_from_slice(&(data.len() as u32).to_be_bytes());
+    out.extend_from_slice(&ty.0);
+    out.extend_from_slice(data);
+    out.extend_from_slice(&format::chunk_crc(ty, data).to_be_bytes());
+}
+
+/// §5.1: with `packed_len` = 0 (no Gaussians, or every component 0 bits wide) there is
+/// nothing to compress. Stored, the data is empty; under zstd it is a stream that
+/// decompresses to nothing: an empty frame, or no frame at all (empty data). Both read
+/// as the stored form does; any byte of data beyond that is refused.
+#[test]
+fn an_empty_attribute_under_zstd() {
+    let mut scene = format::tests_support::tiny_scene();
+    scene.gaussians = gsi::model::GaussianSet::default();
+    let records = Records::from_scene(&scene, BitDepths::default());
+    let stored = format::to_bytes(&records, &WriteOptions::default()).unwrap();
+    let reference = format::read_file(&stored[..], Limits::default())
+        .unwrap()
+        .records;
+    let pre = 6 + 9 * 2;
+    fn zstd_with(data: &[u8], pre: usize) -> impl Fn(&[u8]) -> Vec<u8> + '_ {
+        move |p: &[u8]| {
+            assert_eq!(p.len(), pre, "stored empty GPOS");
+            let mut q = p.to_vec();
+            q[pre - 5] = 1;
+            q.extend_from_slice(data);
+            q
+        }
+    }
+    let empty_frame = zstd::bulk::compress(&[], 3).unwrap();
+    for (what, data) in [("no frame", &[][..]), ("an empty frame", &empty_frame[..])] {
+        let b = rewrite(&stored, ChunkType::POSITIONS, zstd_with(data, pre), &[]);
+        let f = format::read_file(&b[..], Limits::default());
+        assert_eq!(f.map(|f| f.records).ok(), Some(reference.clone()), "{what}");
+    }
+    let b = rewrite(
+        &stored,
+        ChunkType::POSITIONS,
+        zstd_with(&[0x28, 0xb5], pre),
+        &[],
+    );
+    assert!(
+        format::read_file(&b[..], Limits::default()).is_err(),
+        "a broken frame was read"
+    );
+}
+
+/// §2.3: every decoder checks an ancillary chunk's framing, count and length range; its
+/// contents bind only the decoders that use it. A `gENH` of a valid length whose contents
+/// are not an enhancer still renders, and is refused where it is interpreted; a second
+/// `gENH` is refused by every decoder.
+#[test]
+fn stage_two_chunks_are_checked_where_used() {
+    let plain = format::tests_support::tiny_file();
+    let junk = vec![9u8; 201]; // the shortest gENH §3 allows
+    let b = rewrite(
+        &plain,
+        ChunkType::END,
+        |p| p.to_vec(),
+        &[(ChunkType::ENHANCER, junk.clone())],
+    );
+    let f = format::ChunkedFile::parse(&b, Limits::default()).expect("renders");
+    assert!(
+        f.enhancer(&Limits::default()).is_err(),
+        "junk gENH interpreted"
+    );
+    let two = rewrite(
+        &plain,
+        ChunkType::END,
+        |p| p.to_vec(),
+        &[
+            (ChunkType::ENHANCER, junk.clone()),
+            (ChunkType::ENHANCER, junk),
+        ],
+    );
+    let e = format::read_file(&two[..], Limits::default()).unwrap_err();
+    assert_eq!(e.kind(), ErrorKind::ChunkOrder, "{e}");
+    // Unknown ancillary chunks may repeat.
+    let any = (ChunkType(*b"zzZz"), vec![1, 2]);
+    let b = rewrite(&plain, ChunkType::END, |p| p.to_vec(), &[any.clone(), any]);
+    assert_eq!(
+        format::read_file(&b[..], Limits::default())
+            .unwrap()
+            .ancillary
+            .len(),
+        2
+    );
+}

@@ -109,6 +109,8 @@ impl<R: Read> Decoder<R> {
     pub fn finish(mut self) -> Result<GsiFile> {
         let header = self.read_header()?;
         let (mut pos, mut cov, mut col, mut opa, mut meta) = (None, None, None, None, None);
+        // Stage 2's chunks are kept unparsed (spec §2.3), but each may appear once.
+        let (mut enhancer, mut original) = (false, false);
         let mut ancillary = Vec::new();
         loop {
             let (offset, c) = self.next_chunk()?;
@@ -150,6 +152,16 @@ impl<R: Read> Decoder<R> {
                 ChunkType::COMPRESSION_META => {
                     once(meta.is_some())?;
                     meta = Some(CompressionMeta::parse(&c.data).map_err(here)?);
+                }
+                ChunkType::ENHANCER => {
+                    once(enhancer)?;
+                    enhancer = true;
+                    ancillary.push(c);
+                }
+                ChunkType::ORIGINAL_COLORS => {
+                    once(original)?;
+                    original = true;
+                    ancillary.push(c);
                 }
                 ty if ty.is_critical() => {
                     return Err(
