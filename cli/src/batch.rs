@@ -72,6 +72,11 @@ pub fn expand(inputs: &[PathBuf], exts: &[&str]) -> Result<Vec<PathBuf>, Failure
 /// Pair each input with `dir/<stem>.<ext>`. The folder is created if missing; two inputs
 /// that would write the same output are refused before any work.
 pub fn plan(inputs: Vec<PathBuf>, dir: &Path, ext: &str) -> Result<Vec<Job>, Failure> {
+    if dir == Path::new("-") {
+        return Err(Failure(
+            "a batch writes a folder, not standard output (`-`)".into(),
+        ));
+    }
     std::fs::create_dir_all(dir).map_err(|e| Failure(format!("{}: {e}", dir.display())))?;
     let mut jobs: Vec<Job> = Vec::with_capacity(inputs.len());
     for input in inputs {

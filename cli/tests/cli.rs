@@ -748,7 +748,9 @@ fn batches_of_files_in_one_call() {
     ]);
     assert_refused(&twice, "clash");
     assert!(std::fs::read_dir(&clash).unwrap().next().is_none());
-    // Standard input has no name to write under.
+    // Standard input has no name to write under; standard output is not a folder.
     assert_refused(&run(&["-", i, "-o", &o]), "stdin in a batch");
+    assert_refused(&run(&[i, "-o", "-"]), "a batch to stdout");
+    assert!(!Path::new("-").exists());
     std::fs::remove_dir_all(dir).unwrap();
 }
