@@ -83,8 +83,20 @@ pub fn plan(inputs: Vec<PathBuf>, dir: &Path, ext: &str) -> Result<Vec<Job>, Fai
         let stem = input
             .file_stem()
             .ok_or_else(|| Failure(format!("{}: not a file name", input.display())))?;
-        let output = dir.join(stem).with_extension(ext);
-        if let Some(other) = jobs.iter().find(|j| j.output == output) {
+        // `stem.ext`, not `with_extension`, which would cut `photo.v1` to `photo`.
+        let mut name = stem.to_os_string();
+        name.push(".");
+        name.push(ext);
+        let output = dir.join(name);
+        // Where names differ only in case, a case-insensitive file system has one file.
+        let same = |a: &Path, b: &Path| {
+            if cfg!(any(target_os = "macos", target_os = "windows")) {
+                a.to_string_lossy().to_lowercase() == b.to_string_lossy().to_lowercase()
+            } else {
+                a == b
+            }
+        };
+        if let Some(other) = jobs.iter().find(|j| same(&j.output, &output)) {
             return Err(Failure(format!(
                 "{} and {} would both write {}",
                 other.input.display(),

@@ -17,9 +17,10 @@ pub struct Args {
     /// PNG on standard output); or the folder of a batch.
     #[arg(short, long)]
     output: PathBuf,
-    /// In a batch, the format of the images written: png, jpg, webp or ppm.
-    #[arg(long, default_value = "png")]
-    format: String,
+    /// The format of the images written: png, jpg, webp or ppm. By default PNG in a
+    /// batch, and the output's extension for one file.
+    #[arg(long)]
+    format: Option<String>,
     /// In a batch, decode again files whose output already exists and is a readable
     /// image (by default they are skipped).
     #[arg(long)]
@@ -71,7 +72,11 @@ pub fn run(args: Args) -> Result<(), Failure> {
         return run_batch(&args);
     }
     // Input and output are checked before any rendering (or GPU start-up).
-    let (file, format) = (&args.files[0], OutputFormat::of(&args.output)?);
+    let format = match &args.format {
+        Some(f) => OutputFormat::named(f)?,
+        None => OutputFormat::of(&args.output)?,
+    };
+    let file = &args.files[0];
     let f = read_gsi(file)?;
     let h = &f.records.header;
     let (w, ht) = output_size(h.width, h.height, &args)?;
@@ -82,9 +87,10 @@ pub fn run(args: Args) -> Result<(), Failure> {
 
 /// `gsi decode` of many files into the folder `args.output`.
 fn run_batch(args: &Args) -> Result<(), Failure> {
-    let format = OutputFormat::of(Path::new(&format!("x.{}", args.format)))?;
+    let ext = args.format.as_deref().unwrap_or("png");
+    let format = OutputFormat::named(ext)?;
     let files = crate::batch::expand(&args.files, &["gsi"])?;
-    let jobs = crate::batch::plan(files, &args.output, &args.format)?;
+    let jobs = crate::batch::plan(files, &args.output, ext)?;
     let gpu = device::open(args.device, "decoding", false)?;
     let parallel = match (args.jobs, &gpu) {
         (Some(0), _) => return Err(Failure("--jobs must be at least 1".into())),

@@ -257,7 +257,7 @@ fn enhance_file(
                 "{}: mean luma {luma:.3} is above {LOW_LIGHT_LUMA}: not a low-light image, left unchanged (--force enhances it anyway)",
                 input.display()
             ));
-            if dest != input {
+            if !args.in_place {
                 write(dest, &bytes)?;
             }
             return Ok(lines);

@@ -79,6 +79,11 @@ impl OutputFormat {
         }
     }
 
+    /// The format named `name` (an extension without its dot, as `--format` takes it).
+    pub fn named(name: &str) -> Result<OutputFormat, Failure> {
+        OutputFormat::of(Path::new(&format!("x.{name}")))
+    }
+
     /// `rgb` (8-bit RGB, `w`×`h`) in this format.
     pub fn encode(self, rgb: &[u8], w: u32, h: u32) -> Result<Vec<u8>, Failure> {
         use image::ImageEncoder;

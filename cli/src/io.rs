@@ -44,13 +44,16 @@ pub fn write_output(path: &Path, bytes: &[u8]) -> io::Result<()> {
     result
 }
 
-/// `dir/.name.gsi-tmp-<pid>`: same folder (so the rename is atomic), hidden, unique per process.
+/// `dir/.name.gsi-tmp-<pid>-<k>`: same folder (so the rename is atomic), hidden, unique
+/// per process and per write (a batch writes several files at once).
 fn temp_sibling(path: &Path) -> PathBuf {
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    path.with_file_name(format!(".{name}.gsi-tmp-{}", std::process::id()))
+    use std::sync::atomic::{AtomicU64, Ordering};
+    static WRITES: AtomicU64 = AtomicU64::new(0);
+    let k = WRITES.fetch_add(1, Ordering::Relaxed);
+    let mut name = std::ffi::OsString::from(".");
+    name.push(path.file_name().unwrap_or_default());
+    name.push(format!(".gsi-tmp-{}-{k}", std::process::id()));
+    path.with_file_name(name)
 }
 
 /// Print `text` and a newline on standard output. A reader that stops early (`gsi info f |

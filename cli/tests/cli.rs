@@ -621,6 +621,22 @@ fn decode_writes_png_jpeg_webp_and_ppm() {
         .sum::<f64>()
         / png.as_raw().len() as f64;
     assert!(err < 25.0, "JPEG mean squared error {err}");
+    // `--format` names the format whatever the name says.
+    let named = dir.join("out.img");
+    let r = gsi(&[
+        "decode",
+        file.to_str().unwrap(),
+        "-o",
+        named.to_str().unwrap(),
+        "--format",
+        "webp",
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let bytes = std::fs::read(&named).unwrap();
+    assert_eq!(
+        image::guess_format(&bytes).unwrap(),
+        image::ImageFormat::WebP
+    );
     let bad = dir.join("out.gif");
     assert_refused(
         &gsi(&[
@@ -649,6 +665,8 @@ fn batches_of_files_in_one_call() {
             .save(inputs.join(name))
             .unwrap();
     }
+    // A dot inside the name stays in the output's name.
+    test_pixels(16, 12).save(inputs.join("d.v1.png")).unwrap();
     std::fs::write(inputs.join("broken.png"), b"\x89PNG\r\n\x1a\n not really").unwrap();
     std::fs::write(inputs.join("notes.txt"), b"not an image, not looked at").unwrap();
     let small = ["--gaussians", "30", "--iterations", "8"];
@@ -658,9 +676,10 @@ fn batches_of_files_in_one_call() {
     let err = String::from_utf8_lossy(&batch.stderr);
     assert_eq!(batch.status.code(), Some(1), "{err}");
     assert!(
-        err.contains("broken.png") && err.contains("1 of 4 files failed"),
+        err.contains("broken.png") && err.contains("1 of 5 files failed"),
         "{err}"
     );
+    assert!(out.join("d.v1.gsi").exists());
     for name in ["a", "b", "c"] {
         let single = dir.join(format!("{name}-single.gsi"));
         let input = std::fs::read_dir(&inputs)

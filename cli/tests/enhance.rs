@@ -463,3 +463,24 @@ fn cli_batch_in_place() {
     }
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+/// A file that is not low-light, read from standard input with `-o -`: left unchanged,
+/// and written unchanged to standard output.
+#[test]
+fn cli_a_bright_file_through_pipes_comes_back_unchanged() {
+    use std::io::Write;
+    let bright = dark_file(11, 60, Blend::Alpha, 1.0);
+    let mut child = Command::new(env!("CARGO_BIN_EXE_gsi"))
+        .args(["enhance", "-", "-o", "-", "--iterations", "3"])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    child.stdin.take().unwrap().write_all(&bright).unwrap();
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(err.contains("not a low-light image"), "{err}");
+    assert!(out.stdout == bright, "the file did not come back unchanged");
+}

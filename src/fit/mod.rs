@@ -361,15 +361,21 @@ impl<'a> Fitter<'a> {
     /// the next [`Fitter::step`] or [`Fitter::flush`].
     pub fn sync(&mut self) {
         #[cfg(feature = "gpu")]
-        if let Some((mut resident, base)) = self.resident.take() {
-            let report = resident.collect();
-            match report.and_then(|r| Ok((r, resident.download()?))) {
-                Ok((report, (params, adam))) => {
+        if let Some((resident, base)) = self.resident.as_mut() {
+            let base = *base;
+            match resident.collect() {
+                Ok(Some(r)) => self.ready = self.ready.or(Some(measured(r, base))),
+                Ok(None) => {}
+                // The parameters may still come back: `resident_failed` tries.
+                Err(e) => return self.resident_failed(&e),
+            }
+        }
+        #[cfg(feature = "gpu")]
+        if let Some((resident, _)) = self.resident.take() {
+            match resident.download() {
+                Ok((params, adam)) => {
                     self.params = params;
                     self.adam = adam;
-                    if let Some(r) = report {
-                        self.ready = self.ready.or(Some(measured(r, base)));
-                    }
                 }
                 Err(e) => self.gpu_failed(&e),
             }

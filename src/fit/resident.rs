@@ -82,6 +82,15 @@ struct Backward {
     pixel_groups: (u32, u32),
 }
 
+/// A measured step's report in flight, and what the step was run with.
+struct Pending {
+    read: PendingRead<3>,
+    step: u64,
+    /// The lists' capacity and the quantization the step rendered with.
+    capacity: u32,
+    qat: Option<BitDepths>,
+}
+
 /// The tile lists, and the fit's buffers sized by them.
 struct Lists {
     forward: ForwardLists,
@@ -104,9 +113,9 @@ pub struct ResidentFit<'g> {
     grow_to: Option<u32>,
     /// Steps taken.
     steps: u64,
-    /// The last measured step's report, submitted and not yet collected, with its step
-    /// and the lists' capacity then: partial loss sums, partial squared errors, entries.
-    pending: Option<(PendingRead<3>, u64, u32)>,
+    /// The last measured step's report (partial loss sums, partial squared errors,
+    /// entries), submitted and not yet collected.
+    pending: Option<Pending>,
 }
 
 impl<'g> ResidentFit<'g> {
@@ -221,14 +230,22 @@ impl<'g> ResidentFit<'g> {
                 ],
             );
             let earlier = self.pending.take();
+            let capacity = l.forward.capacity;
             if measure {
                 let read = gpu.read_back_later(enc, [&b.loss_part, &b.sse8_part, &f.entries]);
-                self.pending = Some((read, self.steps, l.forward.capacity));
+                self.pending = Some(Pending {
+                    read,
+                    step: self.steps,
+                    capacity,
+                    qat,
+                });
             } else {
                 gpu.submit([enc.finish()]);
             }
+            // This step, if unmeasured, is what `report` may have to account for.
+            let unmeasured = (!measure).then_some((capacity, qat));
             match earlier {
-                Some(p) => self.report(p),
+                Some(p) => self.report(p, unmeasured),
                 None => Ok(None),
             }
         })
@@ -237,16 +254,26 @@ impl<'g> ResidentFit<'g> {
     /// Wait for the last measured step's report, if one is still to come.
     pub fn collect(&mut self) -> Result<Option<StepReport>> {
         match self.pending.take() {
-            Some(p) => self.gpu.checked(|| self.report(p)),
+            Some(p) => self.gpu.checked(|| self.report(p, None)),
             None => Ok(None),
         }
     }
 
     /// Read a measured step's report; note when its lists must grow or it was skipped.
+    /// `after` is the capacity and quantization of the unmeasured step submitted since, if
+    /// any: when the measured step overflowed, that one rendered the same parameters in
+    /// the same lists and overflowed too.
     fn report(
         &mut self,
-        (read, step, capacity): (PendingRead<3>, u64, u32),
+        p: Pending,
+        after: Option<(u32, Option<BitDepths>)>,
     ) -> Result<Option<StepReport>> {
+        let Pending {
+            read,
+            step,
+            capacity,
+            qat,
+        } = p;
         let [loss_part, sse8_part, entries] = read.collect(self.gpu)?;
         let entries = bytemuck::cast_slice::<u8, u32>(&entries)[0];
         let loss: f64 = bytemuck::cast_slice::<u8, f32>(&loss_part)
@@ -258,6 +285,7 @@ impl<'g> ResidentFit<'g> {
             .map(|&x| u64::from(x))
             .sum();
         let values = u64::from(self.uniform.width) * u64::from(self.uniform.height) * 3;
+        let lists = capacity;
         let (entries, capacity) = (u64::from(entries), u64::from(capacity));
         let now = u64::from(self.lists.forward.capacity);
         if entries * 4 > now * 3 {
@@ -269,9 +297,14 @@ impl<'g> ResidentFit<'g> {
         }
         if entries > capacity {
             // Skipped, so not counted in Adam's bias correction from the next step on (the
-            // step submitted since counted it, as an unmeasured step that overflows is
-            // counted: the host cannot know of them in time).
+            // step submitted since was corrected with it counted). A skipped step changes
+            // nothing, so an unmeasured step since, with the same lists and quantization,
+            // was skipped as well; a measured one reports for itself. (An unmeasured step
+            // that overflows on its own stays counted: the host cannot know of it.)
             self.adam_step -= 1;
+            if after == Some((lists, qat)) {
+                self.adam_step -= 1;
+            }
             return Ok(None);
         }
         Ok(Some(StepReport {
@@ -439,6 +472,10 @@ mod tests {
         );
         let grown = r.grow_to.expect("the report asked for no more room");
         assert!(grown > 8);
+        assert_eq!(
+            r.adam_step, 0,
+            "a skipped step counted in Adam's bias correction"
+        );
         assert_eq!(r.step(&LR, None, true).unwrap(), None);
         let report = r.collect().unwrap().unwrap();
         assert_eq!(report.step, 2);
@@ -446,6 +483,38 @@ mod tests {
         assert!(report.psnr.is_finite() && report.psnr > 10.0, "{report:?}");
         let (after, _) = r.download().unwrap();
         assert_ne!(after, fitter.params);
+        assert_eq!(r.adam_step, 1);
+    }
+
+    /// The report of an overflowing step comes a step late, when the next step is already
+    /// queued in the same lists: that one, unmeasured, is skipped too and is not counted
+    /// in Adam's bias correction either.
+    #[test]
+    fn the_step_queued_behind_an_overflow_is_not_counted() {
+        let Some(gpu) = gpu() else { return };
+        let t = target(120, 90, Blend::Alpha);
+        let fitter = Fitter::new(&t, 150, Init::Adaptive, Blend::Alpha, Loss::L2, 1);
+        let mut adam = crate::optim::Adam::new(&fitter.params);
+        adam.step = 0;
+        let mut r = ResidentFit::new(&gpu, &t, Blend::Alpha, &fitter.params, &adam).unwrap();
+        r.lists = Lists::new(&gpu, &r.forward, &r.back, Blend::Alpha, 8).unwrap();
+        assert_eq!(r.step(&LR, None, true).unwrap(), None);
+        assert_eq!(
+            r.step(&LR, None, false).unwrap(),
+            None,
+            "an overflow reported"
+        );
+        assert_eq!(r.adam_step, 0);
+        let (after, _) = r.download().unwrap();
+        assert_eq!(
+            after, fitter.params,
+            "a skipped step changed the parameters"
+        );
+        // The lists grew for the third step, which moves the parameters.
+        r.step(&LR, None, true).unwrap();
+        assert_eq!(r.collect().unwrap().map(|m| m.step), Some(3));
+        assert_eq!(r.adam_step, 1);
+        assert_ne!(r.download().unwrap().0, fitter.params);
     }
 
     /// A 1×1 target, and Gaussians none of which is drawn (all off the image): finite

@@ -774,7 +774,11 @@ impl<const N: usize> PendingRead<N> {
             gpu.traffic.stalls.fetch_add(1, relaxed);
         }
         gpu.wait(Some(self.index))?;
-        let mapped = (0..N).all(|_| self.mapped.try_recv() == Ok(true));
+        // The map callbacks run on whichever thread polls the device next: another one
+        // may be running them still, so each message is waited for (the senders are gone
+        // once the callbacks have run, so this cannot hang past the timeout).
+        let timeout = *gpu.wait_timeout.lock().unwrap_or_else(|e| e.into_inner());
+        let mapped = (0..N).all(|_| self.mapped.recv_timeout(timeout) == Ok(true));
         if !mapped {
             return Err(Error::new(
                 ErrorKind::Device,
