@@ -127,17 +127,12 @@ pub fn run<W>(
 where
     W: Fn(&Job, &(dyn Fn(f32) + Sync)) -> Done + Sync,
 {
-    use std::io::IsTerminal;
     const STEPS: u64 = 1000;
-    let bar = indicatif::ProgressBar::new(jobs.len() as u64 * STEPS);
-    if !quiet && std::io::stderr().is_terminal() {
-        bar.set_style(
-            indicatif::ProgressStyle::with_template("{bar:30} {msg}  ETA {eta}")
-                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-        );
-    } else {
-        bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
-    }
+    let bar = crate::io::progress_bar(
+        jobs.len() as u64 * STEPS,
+        quiet,
+        "{bar:30} {msg}  ETA {eta}",
+    );
     // Each job's progress, in thousandths; the bar shows their sum.
     let progress: Vec<AtomicUsize> = jobs.iter().map(|_| AtomicUsize::new(0)).collect();
     let (next, finished, failed) = (
@@ -200,6 +195,17 @@ where
     match failed.into_inner() {
         0 => Ok(()),
         n => Err(Failure(format!("{n} of {total} files failed"))),
+    }
+}
+
+/// The files a batch runs at once: `--jobs` when given (at least 1), else one on a GPU
+/// (files would only queue for it) and [`default_parallel`] on the CPU.
+pub fn parallel(jobs: Option<usize>, on_gpu: bool) -> Result<usize, Failure> {
+    match (jobs, on_gpu) {
+        (Some(0), _) => Err(Failure("--jobs must be at least 1".into())),
+        (Some(n), _) => Ok(n),
+        (None, true) => Ok(1),
+        (None, false) => Ok(default_parallel()),
     }
 }
 

@@ -92,12 +92,7 @@ fn run_batch(args: &Args) -> Result<(), Failure> {
     let files = crate::batch::expand(&args.files, &["gsi"])?;
     let jobs = crate::batch::plan(files, &args.output, ext)?;
     let gpu = device::open(args.device, "decoding", false)?;
-    let parallel = match (args.jobs, &gpu) {
-        (Some(0), _) => return Err(Failure("--jobs must be at least 1".into())),
-        (Some(n), _) => n,
-        (None, Some(_)) => 1,
-        (None, None) => crate::batch::default_parallel(),
-    };
+    let parallel = crate::batch::parallel(args.jobs, gpu.is_some())?;
     let skip = |job: &crate::batch::Job| {
         let readable = !args.force && image::image_dimensions(&job.output).is_ok();
         readable.then(|| "an image is there (--force decodes it again)".to_string())

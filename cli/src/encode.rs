@@ -4,7 +4,6 @@ use crate::device::{self, DeviceArg};
 use crate::{batch, image_io, io, Failure};
 use gsi::fit::{self, Budget, EncodeOptions, Init, Loss, Target};
 use gsi::model::Blend;
-use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 
 #[derive(clap::Args)]
@@ -170,16 +169,7 @@ pub fn run(args: Args) -> Result<(), Failure> {
         return run_batch(&args, &opts);
     }
     let input = &args.inputs[0];
-    let show = !args.quiet && std::io::stderr().is_terminal();
-    let bar = indicatif::ProgressBar::new(u64::from(args.iterations));
-    if show {
-        bar.set_style(
-            indicatif::ProgressStyle::with_template("{bar:30} {pos}/{len} it  {msg}  ETA {eta}")
-                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-        );
-    } else {
-        bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
-    }
+    let bar = io::progress_bar(u64::from(args.iterations), args.quiet, io::ITERATIONS_BAR);
     let mut progress = |p: &fit::Progress| {
         bar.set_length(u64::from(p.total));
         bar.set_position(u64::from(p.iteration));
@@ -205,12 +195,7 @@ fn run_batch(args: &Args, opts: &EncodeOptions) -> Result<(), Failure> {
     let inputs = batch::expand(&args.inputs, IMAGE_EXTENSIONS)?;
     let jobs = batch::plan(inputs, &args.output, "gsi")?;
     let gpu = device::open(args.device, "fitting", args.quiet)?;
-    let parallel = match (args.jobs, &gpu) {
-        (Some(0), _) => return Err(Failure("--jobs must be at least 1".into())),
-        (Some(n), _) => n,
-        (None, Some(_)) => 1,
-        (None, None) => batch::default_parallel(),
-    };
+    let parallel = batch::parallel(args.jobs, gpu.is_some())?;
     let skip = |job: &batch::Job| {
         let valid = !args.force
             && std::fs::File::open(&job.output).is_ok_and(|f| {

@@ -5,7 +5,7 @@ use crate::{io, Failure};
 use gsi::enhance::fit::{scene_luma, EnhanceOptions};
 use gsi::enhance::{self, LOW_LIGHT_LUMA};
 use gsi::format::{ChunkType, ChunkedFile, Limits};
-use std::io::{IsTerminal, Read};
+use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
@@ -97,16 +97,7 @@ pub fn run(args: Args) -> Result<(), Failure> {
         ));
     }
     let dest = args.output.clone().unwrap_or_else(|| input.clone());
-    let show = !args.quiet && std::io::stderr().is_terminal();
-    let bar = indicatif::ProgressBar::new(u64::from(args.iterations));
-    if show {
-        bar.set_style(
-            indicatif::ProgressStyle::with_template("{bar:30} {pos}/{len} it  {msg}  ETA {eta}")
-                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-        );
-    } else {
-        bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
-    }
+    let bar = io::progress_bar(u64::from(args.iterations), args.quiet, io::ITERATIONS_BAR);
     let mut progress = |p: &gsi::enhance::fit::Progress| {
         bar.set_position(u64::from(p.iteration));
         if args.verbose && (p.iteration % 50 == 0 || p.iteration == p.iterations) {
@@ -177,12 +168,7 @@ fn run_batch(args: &Args) -> Result<(), Failure> {
     if fits {
         device(args, &gpu)?;
     }
-    let parallel = match (args.jobs, gpu.get().and_then(Option::as_ref)) {
-        (Some(0), _) => return Err(Failure("--jobs must be at least 1".into())),
-        (Some(n), _) => n,
-        (None, Some(_)) => 1,
-        (None, None) => crate::batch::default_parallel(),
-    };
+    let parallel = crate::batch::parallel(args.jobs, gpu.get().is_some_and(Option::is_some))?;
     let skip = |job: &crate::batch::Job| {
         if args.force || args.revert || args.apply_from.is_some() {
             return None;

@@ -56,6 +56,25 @@ fn temp_sibling(path: &Path) -> PathBuf {
     path.with_file_name(name)
 }
 
+/// The bar of one file's fit: iterations, the fit's own message, time left.
+pub const ITERATIONS_BAR: &str = "{bar:30} {pos}/{len} it  {msg}  ETA {eta}";
+
+/// A progress bar of `len` steps drawn with `template` on a terminal, hidden when `quiet`
+/// or when standard error is not a terminal (logs and pipes get no control codes).
+pub fn progress_bar(len: u64, quiet: bool, template: &str) -> indicatif::ProgressBar {
+    use std::io::IsTerminal;
+    let bar = indicatif::ProgressBar::new(len);
+    if !quiet && io::stderr().is_terminal() {
+        bar.set_style(
+            indicatif::ProgressStyle::with_template(template)
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+    } else {
+        bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
+    }
+    bar
+}
+
 /// Print `text` and a newline on standard output. A reader that stops early (`gsi info f |
 /// head`) closes the pipe: that ends the output quietly, where `println!` would panic.
 pub fn print_line(text: &str) -> Result<(), crate::Failure> {

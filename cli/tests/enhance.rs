@@ -252,6 +252,24 @@ fn gsi(args: &[&str]) -> Output {
         .unwrap()
 }
 
+/// `gsi args` with `input` on standard input (fed from a thread, so that a large output
+/// cannot deadlock the pipe).
+fn gsi_piped(args: &[&str], input: &[u8]) -> Output {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_gsi"))
+        .args(args)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stdin = child.stdin.take().unwrap();
+    let input = input.to_vec();
+    let feeder = std::thread::spawn(move || std::io::Write::write_all(&mut stdin, &input));
+    let out = child.wait_with_output().unwrap();
+    feeder.join().unwrap().unwrap();
+    out
+}
+
 fn tmp(name: &str) -> std::path::PathBuf {
     let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("enhance-cli");
     std::fs::create_dir_all(&dir).unwrap();
@@ -342,18 +360,10 @@ fn cli_leaves_a_bright_image_alone_unless_forced() {
 #[test]
 fn cli_works_in_a_pipe_and_refuses_bad_usage() {
     let before = dark_file(12, 40, Blend::Sum, 0.15);
-    let mut child = Command::new(env!("CARGO_BIN_EXE_gsi"))
-        .args(["enhance", "-", "-o", "-", "--iterations", "20", "--quiet"])
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut stdin = child.stdin.take().unwrap();
-    let input = before.clone();
-    let feeder = std::thread::spawn(move || std::io::Write::write_all(&mut stdin, &input));
-    let out = child.wait_with_output().unwrap();
-    feeder.join().unwrap().unwrap();
+    let out = gsi_piped(
+        &["enhance", "-", "-o", "-", "--iterations", "20", "--quiet"],
+        &before,
+    );
     assert!(
         out.status.success(),
         "{}",
@@ -468,17 +478,8 @@ fn cli_batch_in_place() {
 /// and written unchanged to standard output.
 #[test]
 fn cli_a_bright_file_through_pipes_comes_back_unchanged() {
-    use std::io::Write;
     let bright = dark_file(11, 60, Blend::Alpha, 1.0);
-    let mut child = Command::new(env!("CARGO_BIN_EXE_gsi"))
-        .args(["enhance", "-", "-o", "-", "--iterations", "3"])
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    child.stdin.take().unwrap().write_all(&bright).unwrap();
-    let out = child.wait_with_output().unwrap();
+    let out = gsi_piped(&["enhance", "-", "-o", "-", "--iterations", "3"], &bright);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{err}");
     assert!(err.contains("not a low-light image"), "{err}");

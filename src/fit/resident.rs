@@ -452,6 +452,16 @@ mod tests {
         t
     }
 
+    /// A fit of `params` to `t` whose tile lists hold 8 entries, far too few for a step,
+    /// with Adam at step 0.
+    fn in_tiny_lists<'g>(gpu: &'g Gpu, t: &RgbImage, params: &GaussianSet) -> ResidentFit<'g> {
+        let mut adam = crate::optim::Adam::new(params);
+        adam.step = 0;
+        let mut r = ResidentFit::new(gpu, t, Blend::Alpha, params, &adam).unwrap();
+        r.lists = Lists::new(gpu, &r.forward, &r.back, Blend::Alpha, 8).unwrap();
+        r
+    }
+
     /// Lists too small for a step: the step changes nothing, the next report asks for
     /// more room, and the step after it, in the grown lists, moves the parameters.
     #[test]
@@ -459,10 +469,7 @@ mod tests {
         let Some(gpu) = gpu() else { return };
         let t = target(120, 90, Blend::Alpha);
         let fitter = Fitter::new(&t, 150, Init::Adaptive, Blend::Alpha, Loss::L2, 1);
-        let mut adam = crate::optim::Adam::new(&fitter.params);
-        adam.step = 0;
-        let mut r = ResidentFit::new(&gpu, &t, Blend::Alpha, &fitter.params, &adam).unwrap();
-        r.lists = Lists::new(&gpu, &r.forward, &r.back, Blend::Alpha, 8).unwrap();
+        let mut r = in_tiny_lists(&gpu, &t, &fitter.params);
         assert_eq!(r.step(&LR, None, true).unwrap(), None);
         assert_eq!(r.collect().unwrap(), None, "an overflowing step reported");
         let (after, _) = r.download().unwrap();
@@ -494,10 +501,7 @@ mod tests {
         let Some(gpu) = gpu() else { return };
         let t = target(120, 90, Blend::Alpha);
         let fitter = Fitter::new(&t, 150, Init::Adaptive, Blend::Alpha, Loss::L2, 1);
-        let mut adam = crate::optim::Adam::new(&fitter.params);
-        adam.step = 0;
-        let mut r = ResidentFit::new(&gpu, &t, Blend::Alpha, &fitter.params, &adam).unwrap();
-        r.lists = Lists::new(&gpu, &r.forward, &r.back, Blend::Alpha, 8).unwrap();
+        let mut r = in_tiny_lists(&gpu, &t, &fitter.params);
         assert_eq!(r.step(&LR, None, true).unwrap(), None);
         assert_eq!(
             r.step(&LR, None, false).unwrap(),
