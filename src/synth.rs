@@ -115,6 +115,28 @@ mod corpus {
         }
     }
 
+    /// `records` with every attribute in method 2 (§5.4) and the given modes (positions,
+    /// covariance, colours, opacity), as version 1.1 and with no `gCRM`: each mode meets
+    /// the decoder whether or not the encoder would have chosen it.
+    fn coded(records: &Records, modes: [&[u8]; 4]) -> Vec<u8> {
+        let mut header = records.header.clone();
+        header.version_minor = format::VERSION_MINOR_CODED;
+        let attributes = [
+            (ChunkType::POSITIONS, Some(&records.positions), modes[0]),
+            (ChunkType::COVARIANCE, Some(&records.covariance), modes[1]),
+            (ChunkType::COLORS, Some(&records.colors), modes[2]),
+            (ChunkType::OPACITY, records.opacity.as_ref(), modes[3]),
+        ];
+        let mut chunks = vec![(ChunkType::HEADER, header.to_bytes().to_vec())];
+        for (ty, a, m) in attributes {
+            if let Some(a) = a {
+                chunks.push((ty, a.to_coded_payload(m).expect("valid modes")));
+            }
+        }
+        chunks.push((ChunkType::END, Vec::new()));
+        assemble(&chunks)
+    }
+
     fn random(seed: u64, spec: SceneSpec) -> Records {
         Records::from_scene(&random_scene(seed, spec), BitDepths::default())
     }
@@ -200,6 +222,50 @@ mod corpus {
         out.push(CorpusFile {
             name: "unknown-ancillary-chunk.gsi".into(),
             bytes: format::to_bytes(&records, &opts).expect("in-memory write"),
+            expect: None,
+        });
+        // Method 2 (§5.4): a `sum` file along its Morton curve as the encoder writes it,
+        // and files in every mode, at the widest and at no depth.
+        let mut sorted = random(14, spec(192, 128, 3000, Sum, Lsr, false));
+        sorted.sort_spatially();
+        out.push(CorpusFile {
+            name: "coded-sum-lsr-3000-morton.gsi".into(),
+            bytes: coded(&sorted, [&[3, 3], &[0, 1, 2], &[0, 1, 1], &[]]),
+            expect: None,
+        });
+        out.push(CorpusFile {
+            name: "coded-alpha-cholesky-500-every-mode.gsi".into(),
+            bytes: coded(
+                &random(15, spec(96, 64, 500, Alpha, Cholesky, true)),
+                [&[2, 2], &[2, 0, 1], &[0, 2, 1], &[2]],
+            ),
+            expect: None,
+        });
+        let wide = BitDepths {
+            position: 24,
+            covariance: 24,
+            color: 12,
+            opacity: 9,
+        };
+        let mut wide_records =
+            Records::from_scene(&random_scene(16, spec(64, 48, 200, Sum, Lsr, true)), wide);
+        wide_records.sort_spatially();
+        out.push(CorpusFile {
+            name: "coded-sum-24-bit.gsi".into(),
+            bytes: coded(&wide_records, [&[3, 3], &[0, 1, 0], &[2, 1, 1], &[0]]),
+            expect: None,
+        });
+        out.push(CorpusFile {
+            name: "coded-empty-0-gaussians.gsi".into(),
+            bytes: coded(
+                &random(17, spec(32, 24, 0, Sum, Lsr, false)),
+                [&[3, 3], &[0, 0, 0], &[0, 0, 0], &[]],
+            ),
+            expect: None,
+        });
+        out.push(CorpusFile {
+            name: "coded-degenerate-covariances.gsi".into(),
+            bytes: coded(&degenerate(Lsr), [&[2, 2], &[0, 1, 2], &[0, 1, 1], &[2]]),
             expect: None,
         });
         // Stage 2: a file enhanced in the container (gENH and gORC before GEND).
@@ -557,6 +623,7 @@ mod corpus {
                 d.extend_from_slice(&[0xff, 0xfe])
             }),
         ));
+        coded_invalid(&base_records, &mut files);
         files
             .into_iter()
             .map(|(kind, what, bytes)| CorpusFile {
@@ -565,6 +632,93 @@ mod corpus {
                 expect: Some(kind),
             })
             .collect()
+    }
+
+    /// Malformed payloads of method 2 (§5.4), each in a file that is otherwise `records`
+    /// coded and valid.
+    fn coded_invalid(records: &Records, files: &mut Vec<(ErrorKind, &'static str, Vec<u8>)>) {
+        use ErrorKind as K;
+        let n = records.header.count as usize;
+        let base = coded(records, [&[3, 3], &[0, 1, 2], &[0, 1, 1], &[2]]);
+        let parts = chunks(&base);
+        let at = |ty: ChunkType| parts.iter().position(|(t, _)| *t == ty).expect("chunk");
+        let with = |ty: ChunkType, payload: Vec<u8>| {
+            let mut p = parts.clone();
+            p[at(ty)].1 = payload;
+            assemble(&p)
+        };
+        let edit = |ty: ChunkType, f: &dyn Fn(&mut Vec<u8>)| {
+            let mut d = parts[at(ty)].1.clone();
+            f(&mut d);
+            with(ty, d)
+        };
+        // A 3-component payload: packed_len at 29, modes at 33, the stream from 36.
+        files.push((K::Decompression, "coded-stream-truncated", {
+            edit(ChunkType::COLORS, &|d| {
+                d.pop();
+            })
+        }));
+        files.push((K::Decompression, "coded-stream-bytes-left", {
+            edit(ChunkType::COLORS, &|d| d.push(0))
+        }));
+        files.push((K::Decompression, "coded-stream-starts-ffffffff", {
+            edit(ChunkType::COLORS, &|d| {
+                d[36..40].copy_from_slice(&[0xFF; 4])
+            })
+        }));
+        files.push((K::InvalidValue, "coded-mode-9", {
+            edit(ChunkType::COLORS, &|d| d[34] = 9)
+        }));
+        files.push((K::InvalidValue, "coded-across-on-first-component", {
+            edit(ChunkType::COVARIANCE, &|d| d[33] = 1)
+        }));
+        files.push((K::InvalidValue, "coded-morton-on-three-components", {
+            edit(ChunkType::COVARIANCE, &|d| {
+                d[33..36].copy_from_slice(&[3, 3, 3])
+            })
+        }));
+        files.push((K::InvalidValue, "coded-packed-length-mismatch", {
+            edit(ChunkType::COLORS, &|d| d[32] ^= 1)
+        }));
+        // Streams coded for 4-bit codes, declared 3 bits wide: what they hold leaves the
+        // declared range. `codes` is component 0 (or component 1 of a pair).
+        let narrowed = |k: usize, codes: &dyn Fn(usize) -> u32, modes: &[u8]| {
+            let comps = modes.len();
+            let q = format::Quantizer {
+                bits: 4,
+                min: 0.0,
+                max: 1.0,
+            };
+            let mut all = vec![0u32; comps * n];
+            for i in 0..n {
+                all[k * n + i] = codes(i);
+            }
+            let a = format::Attribute {
+                quantizers: vec![q; comps],
+                codes: all,
+            };
+            let mut d = a.to_coded_payload(modes).expect("valid modes");
+            d[1 + 9 * k] = 3;
+            let packed = (n * (4 * comps - 1)).div_ceil(8) as u32;
+            let at = 2 + 9 * comps;
+            d[at..at + 4].copy_from_slice(&packed.to_be_bytes());
+            d
+        };
+        files.push((K::Decompression, "coded-residual-out-of-range", {
+            with(
+                ChunkType::COLORS,
+                narrowed(0, &|i| if i == 1 { 11 } else { 5 }, &[2, 0, 0]),
+            )
+        }));
+        files.push((K::Decompression, "coded-magnitude-too-wide", {
+            with(ChunkType::COLORS, narrowed(0, &|_| 15, &[2, 0, 0]))
+        }));
+        files.push((K::Decompression, "coded-morton-code-out-of-range", {
+            with(
+                ChunkType::POSITIONS,
+                narrowed(1, &|i| if i == 2 { 12 } else { 3 }, &[3, 3]),
+            )
+        }));
     }
 
     /// Byte offset of chunk `i` in the file `chunks` came from.

@@ -208,3 +208,66 @@ fn opacity_is_not_stored_when_not_needed() {
     .unwrap();
     assert!(e.records.opacity.is_some());
 }
+
+#[test]
+fn sum_files_are_written_along_the_curve_with_method_2() {
+    let t = scene_like(128, 96);
+    let e = encode(
+        &t,
+        &opts(Budget::Bpp(2.0), 40, Blend::Sum),
+        gsi::Device::Cpu,
+        &mut |_| {},
+    )
+    .unwrap();
+    let f = read_file(&e.bytes[..], Limits::default()).unwrap();
+    assert_eq!(
+        f.records.header.version_minor,
+        gsi::format::VERSION_MINOR_CODED
+    );
+    let n = f.records.header.count as usize;
+    let (u, v) = f.records.positions.codes.split_at(n);
+    let keys: Vec<u64> = (0..n)
+        .map(|i| gsi::format::context::morton(u[i], v[i]))
+        .collect();
+    assert!(keys.windows(2).all(|k| k[0] <= k[1]), "not in Morton order");
+    // The same codes in the 1.0 codings take more bytes.
+    let packed: usize = [
+        &f.records.positions,
+        &f.records.covariance,
+        &f.records.colors,
+    ]
+    .iter()
+    .map(|a| a.to_payload(19).unwrap().len())
+    .sum();
+    let coded: usize = [
+        &f.records.positions,
+        &f.records.covariance,
+        &f.records.colors,
+    ]
+    .iter()
+    .map(|a| a.to_payload_with(19, true).unwrap().len())
+    .sum();
+    assert!(
+        coded < packed,
+        "method 2: {coded} bytes, 1.0 codings {packed}"
+    );
+    assert!(e.float_psnr.is_finite() && e.psnr.is_finite());
+}
+
+#[test]
+fn an_unreachable_byte_budget_is_refused_not_exceeded() {
+    let t = scene_like(64, 48);
+    match encode(
+        &t,
+        &opts(Budget::Bpp(0.001), 5, Blend::Sum),
+        gsi::Device::Cpu,
+        &mut |_| {},
+    ) {
+        Err(gsi::fit::Error::BudgetUnreachable {
+            asked_bpp,
+            smallest_bpp,
+        }) => assert!(asked_bpp == 0.001 && smallest_bpp > 0.001),
+        Err(e) => panic!("wrong error: {e}"),
+        Ok(e) => panic!("wrote {} bytes for 0.001 bpp", e.bytes.len()),
+    }
+}

@@ -8,13 +8,18 @@ use std::io::Read;
 /// Bytes of the hex dump in format-spec.md §9: on each line of the code block, the
 /// two-digit hex tokens after the offset, up to the first word that is not one.
 fn spec_hexdump() -> Vec<u8> {
+    spec_block("## 9. Worked example", 1)
+}
+
+/// The bytes of the `nth` code block (1 for the first) after `heading` in format-spec.md.
+fn spec_block(heading: &str, nth: usize) -> Vec<u8> {
     let spec =
         std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/format-spec.md")).unwrap();
-    let section = spec
-        .split("## 9. Worked example")
-        .nth(1)
-        .expect("spec has §9");
-    let block = section.split("```").nth(1).expect("§9 has a code block");
+    let section = spec.split(heading).nth(1).expect("spec has the section");
+    let block = section
+        .split("```")
+        .nth(2 * nth - 1)
+        .expect("the section has the code block");
     let mut bytes = Vec::new();
     for line in block.lines().skip(2) {
         for tok in line.split_whitespace().skip(1) {
@@ -30,6 +35,29 @@ fn spec_hexdump() -> Vec<u8> {
 #[test]
 fn spec_worked_example_matches_the_encoder() {
     assert_eq!(spec_hexdump(), format::tests_support::tiny_file());
+}
+
+#[test]
+fn spec_method_2_examples_decode() {
+    let q = |bits| format::Quantizer {
+        bits,
+        min: 0.0,
+        max: 1.0,
+    };
+    let pos = format::Attribute {
+        quantizers: vec![q(4), q(4)],
+        codes: vec![1, 3, 12, 2, 2, 9],
+    };
+    let col = format::Attribute {
+        quantizers: vec![q(3), q(3), q(3)],
+        codes: vec![7, 1, 4, 6, 1, 5, 6, 0, 5],
+    };
+    for (nth, attribute, modes) in [(1, &pos, &[3u8, 3][..]), (2, &col, &[0, 1, 2][..])] {
+        let bytes = spec_block("### 9.1 Method 2 payloads", nth);
+        let decoded = format::Attribute::from_payload(&bytes, attribute.components(), 3).unwrap();
+        assert_eq!(&decoded, attribute, "example {nth}");
+        assert_eq!(attribute.to_coded_payload(modes).unwrap(), bytes);
+    }
 }
 
 fn sample_files() -> Vec<(Records, Vec<u8>)> {

@@ -57,6 +57,9 @@ case "${1:-}" in
     if [ -f /usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json ]; then
         export VK_DRIVER_FILES=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json
     fi
+    if [ -f /usr/local/nvidia/share/glvnd/egl_vendor.d/10_nvidia.json ]; then
+        export __EGL_VENDOR_LIBRARY_FILENAMES=/usr/local/nvidia/share/glvnd/egl_vendor.d/10_nvidia.json
+    fi
     nvidia-smi --query-gpu=name,driver_version --format=csv,noheader || true
     export WGPU_BACKEND=vulkan
     run_kit
@@ -88,5 +91,8 @@ o='-oAPT::Architecture=amd64 -oAPT::Architectures=amd64 -oDir::State::Lists=/tmp
 # shellcheck disable=SC2086
 apt-get $o update >/dev/null
 # shellcheck disable=SC2086
-(cd "$kit/gl" && apt-get $o download libvulkan1)
+# The NVIDIA Vulkan driver lives in libGLX_nvidia and needs the GL vendor-neutral
+# dispatch libraries beside the loader: with libvulkan1 alone the loader finds the ICD
+# but "could not get vkCreateInstance" from it (seen on an H100 machine).
+(cd "$kit/gl" && apt-get $o download libvulkan1 libegl1 libglvnd0 libopengl0 libgl1 libglx0 libgles2)
 du -sh "$kit"

@@ -3,6 +3,7 @@
 use crate::device::{self, DeviceArg};
 use crate::{batch, image_io, io, Failure};
 use gsi::fit::{self, Budget, EncodeOptions, Init, Loss, Target};
+use gsi::format::BitDepths;
 use gsi::model::Blend;
 use std::path::{Path, PathBuf};
 
@@ -37,6 +38,10 @@ pub struct Args {
     /// Optimizer iterations.
     #[arg(long, default_value_t = 400)]
     iterations: u32,
+    /// Expert override of the bit depths, `POSITION,COVARIANCE,COLOUR,OPACITY` (each
+    /// 1..=24); by default they are chosen from the image size.
+    #[arg(long, value_name = "P,C,K,O")]
+    bits: Option<String>,
     /// Initialization: content-adaptive, or the paper's random cold start.
     #[arg(long, value_enum, default_value_t = InitArg::Adaptive)]
     init: InitArg,
@@ -117,7 +122,9 @@ fn options(args: &Args) -> Result<EncodeOptions, Failure> {
     if args.iterations == 0 {
         return Err(Failure("--iterations must be at least 1".into()));
     }
+    let bits = args.bits.as_deref().map(parse_bits).transpose()?;
     Ok(EncodeOptions {
+        bits,
         budget,
         iterations: args.iterations,
         init: match args.init {
@@ -137,6 +144,29 @@ fn options(args: &Args) -> Result<EncodeOptions, Failure> {
     })
 }
 
+/// `--bits P,C,K,O`: four depths, each 1..=24.
+fn parse_bits(s: &str) -> Result<BitDepths, Failure> {
+    let bad = || {
+        Failure(format!(
+            "--bits {s}: expected four depths 1..=24, as 13,8,8,6"
+        ))
+    };
+    let d: Vec<u8> = s
+        .split(',')
+        .map(|x| x.trim().parse::<u8>().ok().filter(|b| (1..=24).contains(b)))
+        .collect::<Option<_>>()
+        .ok_or_else(bad)?;
+    match d[..] {
+        [position, covariance, color, opacity] => Ok(BitDepths {
+            position,
+            covariance,
+            color,
+            opacity,
+        }),
+        _ => Err(bad()),
+    }
+}
+
 /// Encode `target`, read from `input`, into `output`; the summary line.
 fn encode_file(
     input: &Path,
@@ -153,12 +183,13 @@ fn encode_file(
     let px = f64::from(target.width) * f64::from(target.height);
     let bytes = encoded.bytes.len() as f64;
     let summary = format!(
-        "N {}  {} bytes  {:.3} bpp  Cr {:.1}x  PSNR {:.2} dB",
+        "N {}  {} bytes  {:.3} bpp  Cr {:.1}x  PSNR {:.2} dB (float fit {:.2})",
         encoded.records.header.count,
         encoded.bytes.len(),
         bytes * 8.0 / px,
         3.0 * px / bytes,
-        encoded.psnr
+        encoded.psnr,
+        encoded.float_psnr
     );
     Ok((encoded, summary))
 }

@@ -53,6 +53,27 @@ fn stage2(f: &GsiFile) -> Stage2 {
     }
 }
 
+/// Bits per Gaussian that each attribute chunk spends, its preamble included (`None`
+/// without Gaussians).
+fn bits_per_gaussian(f: &GsiFile) -> Option<Vec<(ChunkType, f64)>> {
+    let n = f.records.header.count;
+    (n > 0).then(|| {
+        f.chunks
+            .iter()
+            .filter(|c| {
+                [
+                    ChunkType::POSITIONS,
+                    ChunkType::COVARIANCE,
+                    ChunkType::COLORS,
+                    ChunkType::OPACITY,
+                ]
+                .contains(&c.ty)
+            })
+            .map(|c| (c.ty, f64::from(c.length) * 8.0 / f64::from(n)))
+            .collect()
+    })
+}
+
 fn finite_or_null(x: f32) -> serde_json::Value {
     if x.is_finite() {
         json!(x)
@@ -101,6 +122,11 @@ fn to_json(f: &GsiFile) -> serde_json::Value {
                 "revertible": stage.revertible,
             }),
         },
+        "bits_per_gaussian": bits_per_gaussian(f).map(|b| {
+            b.iter()
+                .map(|(ty, bits)| (ty.to_string(), json!(bits)))
+                .collect::<serde_json::Map<_, _>>()
+        }),
         "quantizers": {
             "GPOS": quantizers(&r.positions),
             "GCOV": quantizers(&r.covariance),
@@ -140,6 +166,16 @@ fn to_text(f: &GsiFile) -> String {
     );
     if let Some(p) = f.metadata.as_ref().and_then(|s| s.psnr) {
         s += &format!("stored result: {p:.2} dB PSNR against the encoder's input\n");
+    }
+    if let Some(b) = bits_per_gaussian(f) {
+        let total: f64 = b.iter().map(|(_, x)| x).sum();
+        let each: Vec<String> = b.iter().map(|(ty, x)| format!("{ty} {x:.1}")).collect();
+        s += &format!(
+            "bits per Gaussian: {total:.1} ({}; version {}.{})\n",
+            each.join(", "),
+            h.version_major,
+            h.version_minor
+        );
     }
     let st = stage2(f);
     match &st.enhancer {

@@ -5,7 +5,9 @@
 //! `cargo run --manifest-path fuzz/Cargo.toml --features seeds --example gen_seeds [OUT_DIR]`
 //!
 //! `parse/` gets the files as they are; `decode/` gets each with a two-byte prefix that
-//! the `decode` target reads as its output size.
+//! the `decode` target reads as its output size. `coded/` gets method-2 payloads in the
+//! `coded` target's input layout: positions in Morton mode, covariance and colours in
+//! mixed modes, at several depths.
 
 use gsi::format::{to_bytes, BitDepths, ChunkType, RawChunk, Records, WriteOptions};
 use gsi::model::{Blend, CovParam, GaussianSet, Scene};
@@ -136,6 +138,33 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             decode_dir.join(format!("{name}.bin")),
             [&size[..], bytes].concat(),
         )?;
+    }
+    let coded_dir = out.join("coded");
+    std::fs::create_dir_all(&coded_dir)?;
+    for (name, bits) in [("default", DEFAULT), ("odd", ODD), ("wide", WIDE)] {
+        let scene = random_scene(
+            5,
+            SceneSpec {
+                cov_param: CovParam::LogScaleRotation,
+                ..SceneSpec::new(40, 30, 60, Blend::Sum)
+            },
+        );
+        let mut records = Records::from_scene(&scene, bits);
+        records.sort_spatially();
+        for (attr, a, modes) in [
+            ("pos", &records.positions, &[3u8, 3][..]),
+            ("cov", &records.covariance, &[0, 1, 2][..]),
+            ("col", &records.colors, &[2, 1, 1][..]),
+        ] {
+            let payload = a.to_coded_payload(modes).expect("valid modes");
+            let k = a.components();
+            let mut input = vec![(k - 1) as u8];
+            input.extend((a.count() as u16).to_be_bytes());
+            input.extend(a.quantizers.iter().map(|q| q.bits));
+            // Modes and stream follow the preamble unchanged.
+            input.extend_from_slice(&payload[6 + 9 * k..]);
+            std::fs::write(coded_dir.join(format!("{name}-{attr}.bin")), input)?;
+        }
     }
     println!("{} seeds in {}", seeds.len(), out.display());
     Ok(())

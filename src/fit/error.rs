@@ -13,6 +13,9 @@ pub enum Error {
     NonFinite(&'static str),
     /// Writing the file, or reading back what was written, failed in the container layer.
     Format(crate::format::Error),
+    /// The byte budget (`--bpp`) is below the smallest file that can be written for this
+    /// image: one Gaussian and the fixed chunks. Refused rather than written over budget.
+    BudgetUnreachable { asked_bpp: f32, smallest_bpp: f32 },
 }
 
 impl fmt::Display for Error {
@@ -21,6 +24,14 @@ impl fmt::Display for Error {
             Error::InvalidTarget(why) => write!(f, "cannot fit this image: {why}"),
             Error::NonFinite(what) => f.write_str(what),
             Error::Format(e) => e.fmt(f),
+            Error::BudgetUnreachable {
+                asked_bpp,
+                smallest_bpp,
+            } => write!(
+                f,
+                "a budget of {asked_bpp} bpp cannot be met: the smallest file for this image \
+                 is {smallest_bpp:.4} bpp"
+            ),
         }
     }
 }

@@ -9,6 +9,7 @@
 use super::chunk::{framed_len, write_chunk, ChunkType, RawChunk, SIGNATURE};
 use super::enhancer::{EnhancerRecord, OriginalColors};
 use super::error::{invalid, Error, ErrorKind, Result};
+use super::header::VERSION_MINOR_CODED;
 use super::limits::Limits;
 use super::meta::{CompressionMeta, MAX_SETTINGS_LEN};
 use super::reader::{read_file, GsiFile};
@@ -128,9 +129,11 @@ impl ChunkedFile {
                     }
                     out.push(c.clone());
                 }
+                // A 1.0 file stays readable by 1.0 decoders; a 1.1 file may use method 2.
                 ChunkType::COLORS => out.push(RawChunk {
                     ty: c.ty,
-                    data: colors.to_payload(zstd_level)?,
+                    data: colors
+                        .to_payload_with(zstd_level, header.version_minor >= VERSION_MINOR_CODED)?,
                 }),
                 _ => out.push(c.clone()),
             }

@@ -7,8 +7,11 @@ use byteorder::{BigEndian, ByteOrder};
 
 /// Major version this decoder implements; a file with another major is refused.
 pub const VERSION_MAJOR: u8 = 1;
-/// Minor version this encoder writes; higher minors only add what older decoders may ignore.
+/// Minor version of a file that no payload of method 2 needs; minors add only what a
+/// lower one may ignore, or refuses by name (§2.5).
 pub const VERSION_MINOR: u8 = 0;
+/// Minor version of a file with a payload of compression method 2 (§5.4).
+pub const VERSION_MINOR_CODED: u8 = 1;
 /// Exact payload length of `GHDR`.
 pub const HEADER_LEN: usize = 18;
 

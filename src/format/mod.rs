@@ -4,6 +4,8 @@
 //! handled here; section numbers in comments refer to it.
 
 mod chunk;
+mod coder;
+pub mod context;
 mod edit;
 mod enhancer;
 mod error;
@@ -21,7 +23,9 @@ pub use enhancer::{
     tensor_sizes, EnhancerRecord, FitSettings, OriginalColors, MAX_EXPERTS, MAX_HIDDEN, TENSORS,
 };
 pub use error::{Error, ErrorKind, Result};
-pub use header::{ColorSpace, Header, FLAG_IMPORTANCE_ORDERED, VERSION_MAJOR, VERSION_MINOR};
+pub use header::{
+    ColorSpace, Header, FLAG_IMPORTANCE_ORDERED, VERSION_MAJOR, VERSION_MINOR, VERSION_MINOR_CODED,
+};
 pub use limits::Limits;
 pub use meta::CompressionMeta;
 pub use quant::{Quantizer, MAX_BITS};

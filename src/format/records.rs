@@ -1,16 +1,19 @@
 //! Records: the attributes exactly as stored (integer codes plus quantizers), and their
 //! lossless link to the float [`Scene`](crate::model::Scene).
 
+use super::context;
 use super::error::{invalid, Error, ErrorKind, Result};
 use super::header::Header;
 use super::limits::{AllocBudget, Limits};
 use super::quant::{self, Quantizer};
 use crate::model::{GaussianSet, Scene};
-use byteorder::{BigEndian, ByteOrder, WriteBytesExt};
+use byteorder::{BigEndian, ByteOrder};
 
 /// Payload compression method of an attribute chunk.
 pub const METHOD_STORED: u8 = 0;
 pub const METHOD_ZSTD: u8 = 1;
+/// Predicted, context-modelled and range-coded (spec §5.4; version 1.1).
+pub const METHOD_CODED: u8 = 2;
 
 /// Bytes in front of the packed data for an attribute of `components` components.
 pub const fn attribute_preamble_len(components: usize) -> usize {
@@ -71,27 +74,64 @@ impl Attribute {
         out
     }
 
-    /// Serialize as an attribute chunk payload (spec §5.2), choosing whichever of stored
-    /// and zstd at `level` is smaller.
+    /// Serialize as an attribute chunk payload (spec §5.1), choosing whichever of stored
+    /// and zstd at `level` is smaller: a payload every 1.0 decoder reads.
     pub fn to_payload(&self, zstd_level: i32) -> Result<Vec<u8>> {
+        self.to_payload_with(zstd_level, false)
+    }
+
+    /// A method-2 payload in the given modes, for the spec's worked example and tests;
+    /// `None` where the modes are not valid for this attribute.
+    #[doc(hidden)]
+    pub fn to_coded_payload(&self, modes: &[u8]) -> Option<Vec<u8>> {
+        let ok = modes.len() == self.components() && context::check_modes(modes).is_ok();
+        ok.then(|| {
+            let data =
+                context::encode_with_modes(&self.codes, self.count(), &self.quantizers, modes);
+            self.payload(METHOD_CODED, &data)
+        })
+    }
+
+    /// [`to_payload`](Self::to_payload), and with `coded` also method 2 (§5.4), of the
+    /// three whichever is smallest.
+    pub fn to_payload_with(&self, zstd_level: i32, coded: bool) -> Result<Vec<u8>> {
         let packed = quant::pack(&self.codes, self.count(), &self.quantizers);
         let zipped = zstd::bulk::compress(&packed, zstd_level)?;
-        let (method, data) = if zipped.len() < packed.len() {
-            (METHOD_ZSTD, &zipped[..])
+        let (mut method, mut data) = if zipped.len() < packed.len() {
+            (METHOD_ZSTD, zipped)
         } else {
-            (METHOD_STORED, &packed[..])
+            (METHOD_STORED, packed.clone())
         };
+        if coded {
+            let c = context::encode(&self.codes, self.count(), &self.quantizers);
+            if c.len() < data.len() {
+                (method, data) = (METHOD_CODED, c);
+            }
+        }
+        Ok(self.payload(method, &data))
+    }
+
+    /// The preamble (§5.1) and `data`.
+    fn payload(&self, method: u8, data: &[u8]) -> Vec<u8> {
+        let packed_len = quant::packed_len(self.count() as u64, &self.quantizers);
         let mut out = Vec::with_capacity(attribute_preamble_len(self.components()) + data.len());
         out.push(self.components() as u8);
         for q in &self.quantizers {
             out.push(q.bits);
-            out.write_f32::<BigEndian>(q.min)?;
-            out.write_f32::<BigEndian>(q.max)?;
+            out.extend(q.min.to_be_bytes());
+            out.extend(q.max.to_be_bytes());
         }
         out.push(method);
-        out.write_u32::<BigEndian>(packed.len() as u32)?;
+        out.extend((packed_len as u32).to_be_bytes());
         out.extend_from_slice(data);
-        Ok(out)
+        out
+    }
+
+    /// Parse one attribute payload of `count` records (default [`Limits`]): the entry of
+    /// the spec's worked examples and of the fuzz target of method 2.
+    #[doc(hidden)]
+    pub fn from_payload(payload: &[u8], components: usize, count: u32) -> Result<Attribute> {
+        Self::parse_standalone(payload, components, count, &Limits::default())
     }
 
     /// [`parse`](Self::parse) with its own allocation budget, for a payload found outside
@@ -180,11 +220,16 @@ impl Attribute {
                 }
                 &zipped
             }
+            METHOD_CODED => &[],
             m => return Err(invalid(format!("compression method {m}"))),
         };
         let ncodes = u64::from(count) * components as u64;
         budget.reserve(ncodes * 4, "attribute codes")?;
-        let codes = quant::unpack(packed, count as usize, &quantizers);
+        let codes = if method == METHOD_CODED {
+            context::decode(data, count as usize, &quantizers)?
+        } else {
+            quant::unpack(packed, count as usize, &quantizers)
+        };
         if method == METHOD_ZSTD {
             budget.release(expected);
         }
@@ -270,6 +315,32 @@ impl Records {
                     .map(|a| a.values::<1>().into_iter().map(|[o]| o).collect()),
             },
         }
+    }
+
+    /// Reorder the Gaussians along a Morton curve over their position codes, so that
+    /// neighbours in the stream are neighbours in the image and method 2 codes each
+    /// centre as a short step (§5.4). Only for `sum` blending, where the order of the
+    /// Gaussians does not change a pixel; an `alpha` file is left as it is. Clears the
+    /// importance-ordered flag, which the new order no longer honours.
+    pub fn sort_spatially(&mut self) {
+        if self.header.blend != crate::model::Blend::Sum || !self.is_consistent() {
+            return;
+        }
+        let n = self.header.count as usize;
+        let (u, v) = self.positions.codes.split_at(n);
+        let mut order: Vec<usize> = (0..n).collect();
+        order.sort_by_key(|&i| (context::morton(u[i], v[i]), i));
+        for a in [&mut self.positions, &mut self.covariance, &mut self.colors]
+            .into_iter()
+            .chain(self.opacity.as_mut())
+        {
+            a.codes = a
+                .codes
+                .chunks(n.max(1))
+                .flat_map(|plane| order.iter().map(|&i| plane[i]))
+                .collect();
+        }
+        self.header.flags &= !super::header::FLAG_IMPORTANCE_ORDERED;
     }
 
     /// True when every attribute holds `header.count` records of the right width.

@@ -2,8 +2,9 @@
 
 use super::chunk::{framed_len, write_chunk, ChunkType, RawChunk, SIGNATURE};
 use super::error::{invalid, Result};
+use super::header::VERSION_MINOR_CODED;
 use super::meta::{CompressionMeta, MAX_SETTINGS_LEN};
-use super::records::Records;
+use super::records::{attribute_preamble_len, Records, METHOD_CODED};
 use std::io::Write;
 
 /// What goes into a file besides the records.
@@ -17,6 +18,11 @@ pub struct WriteOptions {
     pub settings: Option<String>,
     /// Further ancillary chunks, written in order after the attributes.
     pub ancillary: Vec<RawChunk>,
+    /// Also consider compression method 2 (§5.4) for each attribute, keeping the smallest
+    /// payload; a file that uses it is written as version 1.1, which 1.0 decoders refuse.
+    /// Off by default, so that a plain write stays readable by every 1.0 decoder; the
+    /// encoder turns it on.
+    pub context_coding: bool,
 }
 
 impl Default for WriteOptions {
@@ -26,6 +32,7 @@ impl Default for WriteOptions {
             psnr: None,
             settings: Some(String::new()),
             ancillary: Vec::new(),
+            context_coding: false,
         }
     }
 }
@@ -47,26 +54,29 @@ pub fn write_file<W: Write>(w: &mut W, records: &Records, opts: &WriteOptions) -
             )));
         }
     }
-    let mut body: Vec<(ChunkType, Vec<u8>)> = vec![
-        (
-            ChunkType::POSITIONS,
-            records.positions.to_payload(opts.zstd_level)?,
-        ),
-        (
-            ChunkType::COVARIANCE,
-            records.covariance.to_payload(opts.zstd_level)?,
-        ),
-        (
-            ChunkType::COLORS,
-            records.colors.to_payload(opts.zstd_level)?,
-        ),
+    let attributes = [
+        (ChunkType::POSITIONS, Some(&records.positions)),
+        (ChunkType::COVARIANCE, Some(&records.covariance)),
+        (ChunkType::COLORS, Some(&records.colors)),
+        (ChunkType::OPACITY, records.opacity.as_ref()),
     ];
-    if let Some(o) = &records.opacity {
-        body.push((ChunkType::OPACITY, o.to_payload(opts.zstd_level)?));
+    let mut body: Vec<(ChunkType, Vec<u8>)> = Vec::new();
+    let mut coded = false;
+    for (ty, a) in attributes {
+        if let Some(a) = a {
+            let p = a.to_payload_with(opts.zstd_level, opts.context_coding)?;
+            coded |= p[attribute_preamble_len(a.components()) - 5] == METHOD_CODED;
+            body.push((ty, p));
+        }
     }
     body.extend(opts.ancillary.iter().map(|c| (c.ty, c.data.clone())));
 
-    let header = records.header.to_bytes();
+    // §2.5: a file that uses method 2 says so in its minor version.
+    let mut header = records.header.clone();
+    if coded {
+        header.version_minor = header.version_minor.max(VERSION_MINOR_CODED);
+    }
+    let header = header.to_bytes();
     let mut total = SIGNATURE.len() as u64 + framed_len(header.len()) + framed_len(0);
     total += body.iter().map(|(_, d)| framed_len(d.len())).sum::<u64>();
     let meta = match &opts.settings {

@@ -183,6 +183,21 @@ struct Row {
     ssim: f64,
     seconds: f64,
     jpeg: Option<(u8, usize, f64, f64)>,
+    /// PSNR of the float fit before quantization.
+    float_psnr: f64,
+    /// Bits per Gaussian of GPOS, GCOV, GCOL (GOPA: none in `sum` files) as written, and
+    /// as the 1.0 codings (stored or zstd) would write the same codes.
+    bits: [f64; 3],
+    bits_packed: [f64; 3],
+}
+
+/// Bits per Gaussian of each attribute payload, with or without method 2.
+fn attribute_bits(r: &gsi::format::Records, coded: bool) -> [f64; 3] {
+    let n = f64::from(r.header.count.max(1));
+    [&r.positions, &r.covariance, &r.colors].map(|a| {
+        let p = a.to_payload_with(19, coded).expect("in-memory payload");
+        p.len() as f64 * 8.0 / n
+    })
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -266,6 +281,9 @@ fn main() {
                     ssim,
                     seconds,
                     jpeg,
+                    float_psnr: e.float_psnr,
+                    bits: attribute_bits(&e.records, true),
+                    bits_packed: attribute_bits(&e.records, false),
                 };
                 eprintln!(
                     "{set} {} @{bpp}: N {} {:.3} bpp {:.2} dB {:.1}s | JPEG {}",
@@ -338,6 +356,7 @@ fn write_outputs(args: &Args, rows: &[Row], curve: Option<&Curves>, stamp: &(Str
             json!({
                 "set": r.set, "image": r.image, "target_bpp": r.target_bpp, "gaussians": r.gaussians,
                 "bytes": r.bytes, "bpp": r.bpp, "psnr": r.psnr, "ssim": r.ssim, "seconds": r.seconds,
+                "float_psnr": r.float_psnr, "bits_per_gaussian": r.bits, "bits_per_gaussian_packed": r.bits_packed,
                 "jpeg": r.jpeg.map(|(q, n, p, s)| json!({"quality": q, "bytes": n, "psnr": p, "ssim": s})),
             })
         })
@@ -419,7 +438,74 @@ fn markdown(args: &Args, rows: &[Row], curve: Option<&Curves>, stamp: &(String, 
             mean(g.iter().map(|r| f64::from(r.gaussians))),
         );
     }
-    let _ = writeln!(s, "\nReference (`../shared/data/README.md`, libjpeg 4:2:0 via Pillow, Kodak mean, interpolated): JPEG 29.36 dB at 0.5 bpp, 32.88 dB at 1.0 bpp; WebP 31.79 / 35.28; AVIF 32.66 / 36.12.\n");
+    let _ = writeln!(s, "\nBits per Gaussian by attribute (chunk payloads, preambles included), as written (method 2 where smaller, `sum` files in Morton order) and as the 1.0 codings (stored or zstd) would write the same codes; quantization loss is the float fit's PSNR minus the stored file's (negative where quantization-aware fine-tuning left the float parameters tuned to their quantized values):\n");
+    let _ = writeln!(s, "| set | target bpp | GPOS | GCOV | GCOL | total | total, 1.0 coding | quantization loss dB |");
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|");
+    for (set, bpp) in &groups {
+        let g: Vec<&Row> = rows
+            .iter()
+            .filter(|r| &r.set == set && r.target_bpp == *bpp)
+            .collect();
+        let b = |k: usize| mean(g.iter().map(|r| r.bits[k]));
+        let _ = writeln!(
+            s,
+            "| {set} | {bpp} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.2} |",
+            b(0),
+            b(1),
+            b(2),
+            mean(g.iter().map(|r| r.bits.iter().sum::<f64>())),
+            mean(g.iter().map(|r| r.bits_packed.iter().sum::<f64>())),
+            mean(g.iter().map(|r| r.float_psnr - r.psnr)),
+        );
+    }
+    let _ = writeln!(s, "\nReference (`../shared/data/README.md`, libjpeg 4:2:0 via Pillow, Kodak mean, interpolated): JPEG 29.36 dB at 0.5 bpp, 32.88 dB at 1.0 bpp; WebP 31.79 / 35.28; AVIF 32.66 / 36.12. GaussianImage's published codec on Kodak: 27.4 dB at 0.43 bpp, 28.7 at 0.71, 29.65 at 1.00, 30.5 at 1.28.\n");
+    for set in groups
+        .iter()
+        .map(|g| &g.0)
+        .collect::<std::collections::BTreeSet<_>>()
+    {
+        let points = |jpeg: bool| -> Vec<(f64, f64)> {
+            groups
+                .iter()
+                .filter(|g| &g.0 == set)
+                .filter_map(|(_, bpp)| {
+                    let g: Vec<&Row> = rows
+                        .iter()
+                        .filter(|r| &r.set == set && r.target_bpp == *bpp)
+                        .collect();
+                    if jpeg {
+                        let j: Vec<(f64, f64)> = g
+                            .iter()
+                            .filter_map(|r| {
+                                r.jpeg.map(|j| (j.1 as f64 * r.bpp / r.bytes as f64, j.2))
+                            })
+                            .collect();
+                        (j.len() == g.len())
+                            .then(|| (mean(j.iter().map(|x| x.0)), mean(j.iter().map(|x| x.1))))
+                    } else {
+                        Some((
+                            mean(g.iter().map(|r| r.bpp)),
+                            mean(g.iter().map(|r| r.psnr)),
+                        ))
+                    }
+                })
+                .collect()
+        };
+        let (gsi_pts, jpeg_pts) = (points(false), points(true));
+        let rate = |pts: &[(f64, f64)]| {
+            pts.iter()
+                .map(|(b, p)| format!("{p:.2} dB @ {b:.3}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        let _ = writeln!(
+            s,
+            "BD-rate of gsi against JPEG (image crate, ≤ same bytes; mean bpp and PSNR per target, piecewise-linear in log rate over the PSNR range both cover), {set}: **{}** (gsi {}; JPEG {}).\n",
+            bd_rate(&jpeg_pts, &gsi_pts).map_or("no overlap".into(), |d| format!("{d:+.1} %")),
+            rate(&gsi_pts),
+            rate(&jpeg_pts),
+        );
+    }
     let _ = writeln!(
         s,
         "![PSNR against bpp]({}/psnr_bpp.svg)\n![PSNR against encode time]({}/psnr_time.svg)\n",
@@ -462,6 +548,47 @@ fn markdown(args: &Args, rows: &[Row], curve: Option<&Curves>, stamp: &(String, 
     s
 }
 
+/// GaussianImage's published codec points on Kodak (bpp, mean PSNR), as issue 12 quotes
+/// them.
+const GAUSSIAN_IMAGE_KODAK: [(f64, f64); 4] =
+    [(0.43, 27.4), (0.71, 28.7), (1.00, 29.65), (1.28, 30.5)];
+
+/// Bjøntegaard delta rate of `test` against `anchor`, each a curve of (bpp, PSNR) points
+/// (at least two, PSNR increasing with rate): the mean difference in log rate at equal
+/// PSNR over the PSNR range both cover, as a percentage (negative: `test` needs fewer
+/// bits). Piecewise-linear in log rate rather than the original cubic fit, which
+/// overshoots with few points; `None` where the curves do not overlap.
+fn bd_rate(anchor: &[(f64, f64)], test: &[(f64, f64)]) -> Option<f64> {
+    let curve = |pts: &[(f64, f64)]| {
+        let mut c: Vec<(f64, f64)> = pts.iter().map(|&(r, p)| (p, r.ln())).collect();
+        c.sort_by(|a, b| a.0.total_cmp(&b.0));
+        c
+    };
+    let (a, t) = (curve(anchor), curve(test));
+    let lo = a.first()?.0.max(t.first()?.0);
+    let hi = a.last()?.0.min(t.last()?.0);
+    if a.len() < 2 || t.len() < 2 || hi <= lo {
+        return None;
+    }
+    let at = |c: &[(f64, f64)], p: f64| {
+        let i = c
+            .windows(2)
+            .position(|w| p <= w[1].0)
+            .unwrap_or(c.len() - 2);
+        let (p0, r0, p1, r1) = (c[i].0, c[i].1, c[i + 1].0, c[i + 1].1);
+        r0 + (r1 - r0) * (p - p0) / (p1 - p0).max(1e-12)
+    };
+    let steps = 1000;
+    let mean_diff = (0..steps)
+        .map(|k| {
+            let p = lo + (hi - lo) * (k as f64 + 0.5) / steps as f64;
+            at(&t, p) - at(&a, p)
+        })
+        .sum::<f64>()
+        / steps as f64;
+    Some((mean_diff.exp() - 1.0) * 100.0)
+}
+
 fn plot_rd(rows: &[Row], path: &Path) {
     let root = SVGBackend::new(path, (720, 480)).into_drawing_area();
     root.fill(&WHITE).unwrap();
@@ -498,6 +625,10 @@ fn plot_rd(rows: &[Row], path: &Path) {
     .unwrap()
     .label("JPEG (image crate), ≤ same bytes")
     .legend(|(x, y)| Cross::new((x, y), 4, RED));
+    c.draw_series(LineSeries::new(GAUSSIAN_IMAGE_KODAK, GREEN.stroke_width(2)))
+        .unwrap()
+        .label("GaussianImage codec, Kodak mean (published)")
+        .legend(|(x, y)| PathElement::new(vec![(x - 8, y), (x + 8, y)], GREEN));
     c.configure_series_labels()
         .background_style(WHITE)
         .border_style(BLACK)
@@ -782,4 +913,18 @@ fn metrics_section(lol: &Path, stamp: &(String, String)) -> String {
     }
     let _ = writeln!(s);
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::bd_rate;
+
+    #[test]
+    fn bd_rate_of_a_curve_at_half_the_rate_is_minus_half() {
+        let a = [(0.25, 25.0), (0.5, 27.0), (1.0, 29.0), (1.5, 30.5)];
+        let half: Vec<(f64, f64)> = a.iter().map(|&(r, p)| (r / 2.0, p)).collect();
+        assert!((bd_rate(&a, &half).unwrap() + 50.0).abs() < 1e-6);
+        assert!(bd_rate(&a, &a).unwrap().abs() < 1e-9);
+        assert!(bd_rate(&a, &[(1.0, 40.0), (2.0, 41.0)]).is_none());
+    }
 }

@@ -1,0 +1,64 @@
+//! Any bytes as the stream of a method-2 attribute payload (format-spec.md §5.4), behind a
+//! preamble the input chooses: `Ok` or `Err`, never a panic, a hang or an allocation
+//! beyond the codes the count declares. Input: components (1 + byte % 3), count (u16,
+//! big-endian, at most 4096), one byte per component for its width (% 25), one mode byte
+//! per component (any value, so invalid modes are met too), then the stream.
+//!
+//! An accepted payload must hold codes within each quantizer's range, and coding those
+//! codes again in the same modes must give a payload that decodes to the same codes.
+
+#![no_main]
+
+use gsi::format::{Attribute, Quantizer};
+use libfuzzer_sys::fuzz_target;
+
+fuzz_target!(|data: &[u8]| {
+    let [k, c0, c1, rest @ ..] = data else {
+        return;
+    };
+    let k = 1 + usize::from(*k % 3);
+    let count = u32::from(u16::from_be_bytes([*c0, *c1])).min(4096);
+    if rest.len() < 2 * k {
+        return;
+    }
+    let (bits, rest) = rest.split_at(k);
+    let (modes, stream) = rest.split_at(k);
+    let quantizers: Vec<Quantizer> = bits
+        .iter()
+        .map(|b| match b % 25 {
+            0 => Quantizer {
+                bits: 0,
+                min: 0.5,
+                max: 0.5,
+            },
+            b => Quantizer {
+                bits: b,
+                min: -1.0,
+                max: 2.0,
+            },
+        })
+        .collect();
+    let bits_total: u64 = quantizers.iter().map(|q| u64::from(q.bits)).sum();
+    let mut payload = vec![k as u8];
+    for q in &quantizers {
+        payload.push(q.bits);
+        payload.extend(q.min.to_be_bytes());
+        payload.extend(q.max.to_be_bytes());
+    }
+    payload.push(2);
+    payload.extend(((u64::from(count) * bits_total).div_ceil(8) as u32).to_be_bytes());
+    payload.extend_from_slice(modes);
+    payload.extend_from_slice(stream);
+
+    let Ok(a) = Attribute::from_payload(&payload, k, count) else {
+        return;
+    };
+    let n = count as usize;
+    assert_eq!(a.codes.len(), n * k);
+    for (plane, q) in a.codes.chunks(n.max(1)).zip(&a.quantizers) {
+        assert!(plane.iter().all(|&c| c <= q.max_code()), "code past {q:?}");
+    }
+    let again = a.to_coded_payload(modes).expect("accepted modes are valid");
+    let back = Attribute::from_payload(&again, k, count).expect("re-coded payload decodes");
+    assert_eq!(back, a, "codes change through a re-code");
+});
