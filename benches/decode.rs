@@ -92,5 +92,45 @@ fn render_gpu(c: &mut Criterion) {
 #[cfg(not(feature = "gpu"))]
 fn render_gpu(_: &mut Criterion) {}
 
-criterion_group!(benches, parse_dequantize, render_cpu, render_gpu);
+/// Whole decodes (parse, dequantize, CPU render at the file's size) of the files named in
+/// `GSI_BENCH_FILES` (comma-separated; skipped when unset): real fitted files, for
+/// instance one written with method 2 and the same codes rewritten in the 1.0 codings by
+/// `cargo run --release --example recode`, measured in the same run.
+fn decode_files(c: &mut Criterion) {
+    let Ok(list) = std::env::var("GSI_BENCH_FILES") else {
+        return;
+    };
+    let mut group = c.benchmark_group("decode_file");
+    group
+        .sample_size(30)
+        .warm_up_time(Duration::from_secs(1))
+        .measurement_time(Duration::from_secs(5))
+        .sampling_mode(SamplingMode::Flat);
+    for (i, path) in list.split(',').enumerate() {
+        let bytes = std::fs::read(path).expect("GSI_BENCH_FILES names readable files");
+        let h = read_file(&bytes[..], Limits::default())
+            .expect("a valid file")
+            .records
+            .header;
+        let mut out = vec![0.0f32; (h.width * h.height * 3) as usize];
+        // Numbered, so that a file may be named twice to alternate runs.
+        let file = std::path::Path::new(path).file_name().unwrap_or_default();
+        let name = format!("{i}-{}", file.to_string_lossy());
+        group.bench_function(name, |b| {
+            b.iter(|| {
+                let file = read_file(black_box(&bytes[..]), Limits::default()).expect("valid");
+                render_into(&file.records.to_scene(), h.width, h.height, &mut out).expect("size")
+            })
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(
+    benches,
+    parse_dequantize,
+    render_cpu,
+    render_gpu,
+    decode_files
+);
 criterion_main!(benches);

@@ -137,7 +137,8 @@ pub fn default_bits(width: u32, height: u32, blend: Blend) -> BitDepths {
     }
 }
 
-/// Estimated stored bytes per Gaussian (before zstd, which gains little on packed codes).
+/// Bytes per Gaussian of the codes bit-packed (§5.3): the first guess of N under a byte
+/// budget, before [`coded_bytes_per_gaussian`] measures what method 2 makes of them.
 fn bytes_per_gaussian(bits: BitDepths, blend: Blend) -> f32 {
     let b =
         2 * u32::from(bits.position) + 3 * u32::from(bits.covariance) + 3 * u32::from(bits.color);
@@ -147,6 +148,14 @@ fn bytes_per_gaussian(bits: BitDepths, blend: Blend) -> f32 {
         0
     };
     b as f32 / 8.0
+}
+
+/// How many of `n` Gaussians to keep so that a file of `bpp` fits in `budget` bpp: bytes
+/// beyond the fixed overhead scale with the count; 2 % to spare.
+fn shrunk(n: usize, bpp: f32, budget: f32, px: f32) -> usize {
+    let fixed = FILE_OVERHEAD * 8.0 / px;
+    let ratio = ((budget - fixed) / (bpp - fixed)).clamp(0.0, 1.0);
+    (n as f32 * ratio * 0.98) as usize
 }
 
 /// Bytes per Gaussian of `scene`'s attribute payloads as [`finish`] writes them
@@ -685,8 +694,7 @@ pub fn encode(
                 if bpp <= b {
                     break;
                 }
-                let shrink = (b - FILE_OVERHEAD * 8.0 / px) / (bpp - FILE_OVERHEAD * 8.0 / px);
-                n = ((fitter.params.len() as f32 * shrink * 0.98) as usize).max(1);
+                n = shrunk(fitter.params.len(), bpp, b, px).max(1);
                 fitter.prune_and_grow(0.0, n, 0);
             }
             Budget::TargetPsnr(p) => {
@@ -721,8 +729,7 @@ pub fn encode(
                 smallest_bpp: bpp,
             });
         }
-        let shrink = (b - FILE_OVERHEAD * 8.0 / px) / (bpp - FILE_OVERHEAD * 8.0 / px);
-        let n = ((n_now as f32 * shrink.clamp(0.0, 1.0) * 0.98) as usize).clamp(1, n_now - 1);
+        let n = shrunk(n_now, bpp, b, px).clamp(1, n_now - 1);
         fitter.prune_and_grow(0.0, n, 0);
         result = finish(&mut fitter, bits, opts)?;
     }

