@@ -119,7 +119,7 @@ mod corpus {
     /// covariance, colours, opacity), as version 1.1 and with no `gCRM`: each mode meets
     /// the decoder whether or not the encoder would have chosen it.
     fn coded(records: &Records, modes: [&[u8]; 4]) -> Vec<u8> {
-        let mut header = records.header.clone();
+        let mut header = records.header;
         header.version_minor = format::VERSION_MINOR_CODED;
         let attributes = [
             (ChunkType::POSITIONS, Some(&records.positions), modes[0]),

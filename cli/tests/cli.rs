@@ -389,6 +389,50 @@ fn encode_refuses_what_it_cannot_do() {
     );
     assert_refused(&gsi(&["encode", "/nonexistent.png", "-o", o]), "missing");
     assert!(!Path::new(o).exists());
+    // A byte budget below one Gaussian's file is refused, not exceeded in silence.
+    let tiny = gsi(&[
+        "encode",
+        p,
+        "-o",
+        o,
+        "--bpp",
+        "0.001",
+        "--iterations",
+        "3",
+        "--device",
+        "cpu",
+    ]);
+    assert_refused(&tiny, "unreachable bpp");
+    assert!(String::from_utf8_lossy(&tiny.stderr).contains("cannot be met"));
+    assert!(!Path::new(o).exists());
+    for bits in ["13,8,8", "25,8,8,6", "0,8,8,6", "a,b,c,d"] {
+        assert_refused(&gsi(&["encode", p, "-o", o, "--bits", bits]), bits);
+    }
+    let ok = gsi(&[
+        "encode",
+        p,
+        "-o",
+        o,
+        "--bits",
+        "9,6,7,4",
+        "--gaussians",
+        "4",
+        "--iterations",
+        "3",
+        "--device",
+        "cpu",
+    ]);
+    assert!(
+        ok.status.success(),
+        "{}",
+        String::from_utf8_lossy(&ok.stderr)
+    );
+    let info = String::from_utf8(gsi(&["info", o, "--json"]).stdout).unwrap();
+    assert!(
+        info.contains("\"bits\": 9") && info.contains("bits_per_gaussian"),
+        "{info}"
+    );
+    std::fs::remove_file(o).unwrap();
     // Two budgets at once are a usage error.
     assert_eq!(
         gsi(&["encode", p, "-o", o, "--bpp", "1", "--gaussians", "3"])

@@ -72,7 +72,7 @@ pub fn write_file<W: Write>(w: &mut W, records: &Records, opts: &WriteOptions) -
     body.extend(opts.ancillary.iter().map(|c| (c.ty, c.data.clone())));
 
     // §2.5: a file that uses method 2 says so in its minor version.
-    let mut header = records.header.clone();
+    let mut header = records.header;
     if coded {
         header.version_minor = header.version_minor.max(VERSION_MINOR_CODED);
     }
