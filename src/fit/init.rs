@@ -7,6 +7,7 @@
 //! first iteration, and [`super::lsq`] then solves their colours exactly.
 
 use super::Target;
+use crate::format::context::morton;
 use crate::model::{Blend, GaussianSet};
 use crate::rng::SplitMix64;
 
@@ -163,7 +164,7 @@ pub fn stratified(
         return Vec::new();
     }
     let mut order: Vec<u32> = (0..(w * h) as u32).collect();
-    order.sort_unstable_by_key(|&p| morton(p as usize % w, p as usize / w));
+    order.sort_unstable_by_key(|&p| morton(p % w as u32, p / w as u32));
     let step = total / k as f64;
     let mut next = f64::from(rng.unit()) * step;
     let (mut acc, mut out) = (0f64, Vec::with_capacity(k));
@@ -179,19 +180,6 @@ pub fn stratified(
         out.push(*order.last().expect("non-empty image") as usize);
     }
     out
-}
-
-/// Interleave the bits of `x` and `y` (Z-order).
-fn morton(x: usize, y: usize) -> u64 {
-    fn spread(v: usize) -> u64 {
-        let mut v = v as u64 & 0xFFFF_FFFF;
-        v = (v | (v << 16)) & 0x0000_FFFF_0000_FFFF;
-        v = (v | (v << 8)) & 0x00FF_00FF_00FF_00FF;
-        v = (v | (v << 4)) & 0x0F0F_0F0F_0F0F_0F0F;
-        v = (v | (v << 2)) & 0x3333_3333_3333_3333;
-        (v | (v << 1)) & 0x5555_5555_5555_5555
-    }
-    spread(x) | (spread(y) << 1)
 }
 
 /// `log-scale-rotation` parameters (normalized) of the pixel-space Gaussian with standard

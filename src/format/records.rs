@@ -100,7 +100,7 @@ impl Attribute {
         let (mut method, mut data) = if zipped.len() < packed.len() {
             (METHOD_ZSTD, zipped)
         } else {
-            (METHOD_STORED, packed.clone())
+            (METHOD_STORED, packed)
         };
         if coded {
             let c = context::encode(&self.codes, self.count(), &self.quantizers);
