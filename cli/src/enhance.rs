@@ -2,8 +2,9 @@
 
 use crate::device::DeviceArg;
 use crate::{io, Failure};
-use gsi::enhance::fit::{scene_luma, EnhanceOptions};
-use gsi::enhance::{self, LOW_LIGHT_LUMA};
+use gsi::enhance;
+use gsi::enhance::exposure::{Aim, TOLERANCE};
+use gsi::enhance::fit::{scene_metering, EnhanceOptions};
 use gsi::format::{ChunkType, ChunkedFile, Limits};
 use std::io::Read;
 use std::path::{Path, PathBuf};
@@ -30,9 +31,12 @@ pub struct Args {
     /// Optimizer iterations of the fit.
     #[arg(long, default_value_t = EnhanceOptions::default().iterations)]
     iterations: u32,
-    /// Target mean brightness E of the exposure loss (paper Eq. 17), in (0, 1).
-    #[arg(long, default_value_t = EnhanceOptions::default().params.exposure_target)]
-    exposure: f32,
+    /// Set the output's mean brightness (Rec. 601 luma, in (0, 1)) to E, or `auto`: to
+    /// the exposure metered from the image, as a camera meters a scene. Without it the fit
+    /// is pulled towards 0.5 and the edge term holds noisy, textured images below that,
+    /// which scored better on LOL and on a synthetic low-light set (BENCHMARKS.md).
+    #[arg(long, value_name = "E|auto", value_parser = parse_exposure)]
+    exposure: Option<Exposure>,
     /// Number of colour operators K, the identity included (paper: 16).
     #[arg(long, default_value_t = EnhanceOptions::default().experts)]
     experts: usize,
@@ -123,16 +127,27 @@ pub fn run(args: Args) -> Result<(), Failure> {
     Ok(())
 }
 
+/// What `--exposure` asked for.
+#[derive(Clone, Copy, Debug)]
+enum Exposure {
+    Auto,
+    Exactly(f32),
+}
+
+fn parse_exposure(s: &str) -> Result<Exposure, String> {
+    if s == "auto" {
+        return Ok(Exposure::Auto);
+    }
+    match s.parse::<f32>() {
+        Ok(e) if e > 0.0 && e < 1.0 => Ok(Exposure::Exactly(e)),
+        _ => Err(format!("{s}: a mean luma in (0, 1), or `auto`")),
+    }
+}
+
 /// The options' own checks, before any file is read.
 fn check(args: &Args) -> Result<(), Failure> {
     if args.iterations == 0 {
         return Err(Failure("--iterations must be at least 1".into()));
-    }
-    if !(args.exposure > 0.0 && args.exposure < 1.0) {
-        return Err(Failure(format!(
-            "--exposure {} must be in (0, 1)",
-            args.exposure
-        )));
     }
     let most = usize::from(gsi::format::MAX_EXPERTS);
     if !(1..=most).contains(&args.experts) {
@@ -237,11 +252,22 @@ fn enhance_file(
         let scene = enhance::base_records(&file, &limits)
             .map_err(named)?
             .to_scene();
-        let luma = scene_luma(&scene, opts.work_side);
-        if luma > LOW_LIGHT_LUMA && !args.force {
+        // The rule that chooses the exposure also decides whether to act: a metered
+        // image needs a stop more light, an image given a target must be below it.
+        let m = scene_metering(&scene, opts.work_side);
+        let dark = match opts.aim {
+            Aim::Exact => opts.params.exposure_target > m.own + TOLERANCE,
+            Aim::Balanced | Aim::Metered => m.is_low_light(),
+        };
+        if !dark && !args.force {
+            let why = match opts.aim {
+                Aim::Exact => format!("--exposure {}", opts.params.exposure_target),
+                _ => format!("metered exposure {:.3} (gain {:.2})", m.target, m.gain),
+            };
             lines.push(format!(
-                "{}: mean luma {luma:.3} is above {LOW_LIGHT_LUMA}: not a low-light image, left unchanged (--force enhances it anyway)",
-                input.display()
+                "{}: mean luma {:.3}, {why}: not a low-light image, left unchanged (--force enhances it anyway)",
+                input.display(),
+                m.own
             ));
             if !args.in_place {
                 write(dest, &bytes)?;
@@ -255,10 +281,15 @@ fn enhance_file(
         if let Some(why) = &fitted.fallback {
             lines.push(format!("gsi: {why}"));
         }
+        let aim = match opts.aim {
+            Aim::Balanced => "pulled towards",
+            Aim::Exact | Aim::Metered => "set to",
+        };
         lines.push(format!(
-            "enhanced: mean luma {:.3} -> {:.3}, K {}, {} iterations, {:.1} s",
+            "enhanced: mean luma {:.3} -> {:.3} ({aim} {:.3}), K {}, {} iterations, {:.1} s",
             fitted.mean_luma.0,
             fitted.mean_luma.1,
+            fitted.record.fit.exposure,
             opts.experts,
             opts.iterations,
             start.elapsed().as_secs_f64()
@@ -285,17 +316,24 @@ fn options(args: &Args) -> Result<EnhanceOptions, Failure> {
             )))
         }
     };
+    let defaults = EnhanceOptions::default();
+    let (aim, exposure_target) = match args.exposure {
+        None => (Aim::Balanced, defaults.params.exposure_target),
+        Some(Exposure::Auto) => (Aim::Metered, defaults.params.exposure_target),
+        Some(Exposure::Exactly(e)) => (Aim::Exact, e),
+    };
     Ok(EnhanceOptions {
         weights,
+        aim,
         learning_rate: args.learning_rate,
         iterations: args.iterations,
         experts: args.experts,
         seed: args.seed,
         params: gsi::enhance::loss::LossParams {
-            exposure_target: args.exposure,
-            ..EnhanceOptions::default().params
+            exposure_target,
+            ..defaults.params
         },
-        ..EnhanceOptions::default()
+        ..defaults
     })
 }
 

@@ -8,10 +8,13 @@
 //! ([`apply_from`]) or undone exactly ([`ChunkedFile::revert`]).
 //!
 //! * [`mixture`]: the enhancer as stored and applied (no rendering needed).
+//! * `exposure`: metering the image, for the exposure to aim at and whether to act.
 //! * `features`, `loss`, `operator`, `fit`: fitting it (feature `encode`).
 
 pub mod mixture;
 
+#[cfg(feature = "encode")]
+pub mod exposure;
 #[cfg(feature = "encode")]
 pub mod features;
 #[cfg(feature = "encode")]
@@ -26,12 +29,6 @@ pub mod operator;
 pub use mixture::Enhancer;
 
 use crate::format::{Attribute, ChunkedFile, Limits, Records, Result};
-
-/// Images whose mean luma (Rec. 601, `[0, 1]`) is above this are not low-light, and
-/// are left alone unless the caller insists. Measured on the raw PNGs (BT.601 luma of
-/// each image's pixels, averaged): LOL eval15's low-light inputs 0.025–0.097, the 24
-/// Kodak photographs 0.282–0.687.
-pub const LOW_LIGHT_LUMA: f32 = 0.25;
 
 /// The records a file holds before any enhancement: its geometry with the colours in
 /// `gORC` when it has them, else those in `GCOL`. Stage 2 reads the scene to enhance
@@ -77,7 +74,7 @@ pub fn apply_from(
 
 /// Fit an enhancer to the file's (original) colours, with its mixture on `device`, and
 /// return the rewritten file with what the fit did. The caller decides beforehand whether
-/// the image needs it ([`fit::scene_luma`] against [`LOW_LIGHT_LUMA`]).
+/// the image needs it ([`fit::scene_metering`], [`exposure::Metering::is_low_light`]).
 #[cfg(feature = "encode")]
 pub fn enhance(
     file: &ChunkedFile,

@@ -15,6 +15,9 @@
 //! per-image plot) encodes, enhances, decodes and scores LOL eval15 (see `enhance.rs`).
 
 mod enhance;
+// The report builds the synthetic set; the example `lowlight_set` also measures.
+#[allow(dead_code)]
+mod lowlight;
 
 use gsi::fit::{encode, Budget, EncodeOptions, Init, Progress, Target};
 use gsi::metrics::{self, Rgb8};
@@ -98,12 +101,7 @@ fn load(path: &Path) -> (Target, Vec<u8>) {
 }
 
 fn images(dir: &Path, limit: usize) -> Vec<PathBuf> {
-    let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
-        .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|e| e == "png"))
-        .collect();
-    v.sort();
+    let mut v = lowlight::pngs(dir);
     v.truncate(limit);
     v
 }
@@ -226,7 +224,7 @@ fn main() {
     });
     if args.enhance_only {
         if let Some(lol) = &lol_root {
-            enhance::section(lol, &args.out, args.limit);
+            enhance::section(lol, args.kodak.as_deref(), &args.out, args.limit);
         }
         return;
     }
@@ -300,7 +298,7 @@ fn main() {
         }
     }
     if let Some(lol) = &lol_root {
-        enhance::section(lol, &args.out, args.limit);
+        enhance::section(lol, args.kodak.as_deref(), &args.out, args.limit);
     }
     let curve = args.curve_image.as_ref().map(|p| init_curves(p, &args));
     write_outputs(&args, &rows, curve.as_ref(), &stamp);
