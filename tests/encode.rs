@@ -271,3 +271,71 @@ fn an_unreachable_byte_budget_is_refused_not_exceeded() {
         Ok(e) => panic!("wrote {} bytes for 0.001 bpp", e.bytes.len()),
     }
 }
+
+/// Coarse-to-fine: the coarse steps fit a half-size copy, the full-resolution ones refine it
+/// into a valid file; the progress counts every step once, in order, and its share of the
+/// work grows to 1 with the coarse steps counted at a quarter; and the coarse start is
+/// skipped where the reduced image would be too small.
+#[test]
+fn a_coarse_start_is_refined_at_full_resolution() {
+    use gsi::fit::Coarse;
+    let t = scene_like(96, 64);
+    let coarse = EncodeOptions {
+        coarse: Some(Coarse {
+            factor: 2,
+            fraction: 0.5,
+        }),
+        ..opts(Budget::Gaussians(120), 60, Blend::Sum)
+    };
+    let mut seen = Vec::new();
+    let e = encode(&t, &coarse, gsi::Device::Cpu, &mut |p| seen.push(*p)).unwrap();
+    let img = decodes(&e.bytes, &t);
+    let psnr = gsi::fit::loss::psnr8(&img.data, &t.data, t.width, t.height);
+    assert!((psnr - e.psnr).abs() < 1e-9 && psnr > 24.0, "{psnr}");
+    let first_pass: Vec<_> = seen.iter().take_while(|p| p.total == 60).collect();
+    assert!(first_pass
+        .windows(2)
+        .all(|w| w[0].iteration < w[1].iteration && w[0].work <= w[1].work));
+    // A report counts the steps done: the last says all 60.
+    let last = first_pass.last().unwrap();
+    assert_eq!(last.iteration, 60);
+    // 30 coarse steps at 1/4 and 30 full ones: the coarse ones are a fifth of the work.
+    let at_switch = first_pass.iter().find(|p| p.iteration == 30).unwrap();
+    assert!((at_switch.work - 0.2).abs() < 1e-6, "{}", at_switch.work);
+    assert!((last.work - 1.0).abs() < 1e-9, "{}", last.work);
+    let settings = read_file(&e.bytes[..], Limits::default())
+        .unwrap()
+        .metadata
+        .unwrap()
+        .settings;
+    assert!(settings.contains("coarse=2/0.5"), "{settings}");
+    // The same seed, the same file.
+    let again = encode(&t, &coarse, gsi::Device::Cpu, &mut |_| {}).unwrap();
+    assert_eq!(again.bytes, e.bytes);
+    // A 20×20 image has no 16-pixel half: every step at full resolution, the same file as
+    // without a coarse start (but for the settings line).
+    let small = scene_like(20, 20);
+    let mut plain_seen = Vec::new();
+    let mut coarse_seen = Vec::new();
+    let plain = opts(Budget::Gaussians(20), 20, Blend::Sum);
+    let a = encode(&small, &plain, gsi::Device::Cpu, &mut |p| {
+        plain_seen.push(p.psnr)
+    })
+    .unwrap();
+    let b = encode(
+        &small,
+        &EncodeOptions {
+            budget: Budget::Gaussians(20),
+            iterations: 20,
+            ..coarse
+        },
+        gsi::Device::Cpu,
+        &mut |p| coarse_seen.push(p.psnr),
+    )
+    .unwrap();
+    assert_eq!(
+        a.records.to_scene().gaussians,
+        b.records.to_scene().gaussians
+    );
+    assert_eq!(plain_seen, coarse_seen);
+}

@@ -35,9 +35,15 @@ pub struct Args {
     /// Target PSNR in dB of the stored file (Gaussians are added until it is met).
     #[arg(long, group = "budget")]
     target_psnr: Option<f32>,
-    /// Optimizer iterations.
-    #[arg(long, default_value_t = 400)]
-    iterations: u32,
+    /// From fast to thorough, 1..=9: each level a measured choice of optimizer steps,
+    /// how many of them fit a reduced copy of the image first, and the colour solves
+    /// (BENCHMARKS.md has the time and PSNR of each on Kodak).
+    #[arg(long, default_value_t = fit::Effort::DEFAULT.level(),
+          value_parser = clap::value_parser!(u8).range(1..=9))]
+    effort: u8,
+    /// Expert override of the effort level's optimizer steps (coarse ones included).
+    #[arg(long)]
+    iterations: Option<u32>,
     /// Expert override of the bit depths, `POSITION,COVARIANCE,COLOUR,OPACITY` (each
     /// 1..=24); by default they are chosen from the image size.
     #[arg(long, value_name = "P,C,K,O")]
@@ -105,6 +111,9 @@ pub fn load_image(path: &Path) -> Result<Target, Failure> {
     })
 }
 
+/// Resolution of the work bar.
+const WORK_STEPS: u64 = 1000;
+
 /// The image extensions a folder given as a batch's input is searched for.
 const IMAGE_EXTENSIONS: &[&str] = &[
     "png", "jpg", "jpeg", "bmp", "tif", "tiff", "webp", "ppm", "pgm", "pnm",
@@ -119,14 +128,18 @@ fn options(args: &Args) -> Result<EncodeOptions, Failure> {
         (_, _, Some(p)) => return Err(Failure(format!("--target-psnr {p} must be positive"))),
         _ => Budget::Bpp(1.0),
     };
-    if args.iterations == 0 {
+    if args.iterations == Some(0) {
         return Err(Failure("--iterations must be at least 1".into()));
     }
     let bits = args.bits.as_deref().map(parse_bits).transpose()?;
+    let mut leveled = EncodeOptions::default();
+    fit::Effort::new(args.effort)
+        .ok_or_else(|| Failure(format!("--effort {} is not in 1..=9", args.effort)))?
+        .apply(&mut leveled);
     Ok(EncodeOptions {
         bits,
         budget,
-        iterations: args.iterations,
+        iterations: args.iterations.unwrap_or(leveled.iterations),
         init: match args.init {
             InitArg::Adaptive => Init::Adaptive,
             InitArg::Random => Init::Random,
@@ -140,7 +153,7 @@ fn options(args: &Args) -> Result<EncodeOptions, Failure> {
             LossArg::L2 => Loss::L2,
             LossArg::L1MsSsim => Loss::L1MsSsim { lambda: 0.2 },
         },
-        ..EncodeOptions::default()
+        ..leveled
     })
 }
 
@@ -200,11 +213,15 @@ pub fn run(args: Args) -> Result<(), Failure> {
         return run_batch(&args, &opts);
     }
     let input = &args.inputs[0];
-    let bar = io::progress_bar(u64::from(args.iterations), args.quiet, io::ITERATIONS_BAR);
+    // The bar follows the work, not the steps: coarse steps are cheaper, and a bar that
+    // counted them as full ones would promise an early finish.
+    let bar = io::progress_bar(WORK_STEPS, args.quiet, io::WORK_BAR);
     let mut progress = |p: &fit::Progress| {
-        bar.set_length(u64::from(p.total));
-        bar.set_position(u64::from(p.iteration));
-        bar.set_message(format!("N {}  PSNR {:.2} dB", p.gaussians, p.psnr));
+        bar.set_position((p.work * WORK_STEPS as f64) as u64);
+        bar.set_message(format!(
+            "it {}/{}  N {}  PSNR {:.2} dB",
+            p.iteration, p.total, p.gaussians, p.psnr
+        ));
     };
     // The image is read before the GPU starts: a bad input is refused at once.
     let target = load_image(input)?;
@@ -237,8 +254,8 @@ fn run_batch(args: &Args, opts: &EncodeOptions) -> Result<(), Failure> {
     };
     batch::run(&jobs, parallel, args.quiet, skip, |job, report| {
         let on = gpu.as_ref().map_or(gsi::Device::Cpu, gsi::Device::Gpu);
-        // The budget loops may add passes; the bar follows the iterations announced.
-        let mut progress = |p: &fit::Progress| report(p.iteration as f32 / p.total.max(1) as f32);
+        // The budget loops may add passes; the bar follows the work of the pass.
+        let mut progress = |p: &fit::Progress| report(p.work as f32);
         let target = load_image(&job.input)?;
         let (encoded, summary) =
             encode_file(&job.input, &target, &job.output, opts, on, &mut progress)?;

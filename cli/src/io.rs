@@ -59,6 +59,10 @@ fn temp_sibling(path: &Path) -> PathBuf {
 /// The bar of one file's fit: iterations, the fit's own message, time left.
 pub const ITERATIONS_BAR: &str = "{bar:30} {pos}/{len} it  {msg}  ETA {eta}";
 
+/// The bar of a fit whose steps differ in cost: the share of the work done, the fit's own
+/// message, time left.
+pub const WORK_BAR: &str = "{bar:30} {percent:>3}%  {msg}  ETA {eta}";
+
 /// A progress bar of `len` steps drawn with `template` on a terminal, hidden when `quiet`
 /// or when standard error is not a terminal (logs and pipes get no control codes).
 pub fn progress_bar(len: u64, quiet: bool, template: &str) -> indicatif::ProgressBar {

@@ -383,6 +383,12 @@ fn encode_refuses_what_it_cannot_do() {
         &gsi(&["encode", p, "-o", o, "--iterations", "0"]),
         "0 iterations",
     );
+    // Effort levels outside 1..=9 are a usage error (clap's exit 2), nothing written.
+    for level in ["0", "10", "fast"] {
+        let out = gsi(&["encode", p, "-o", o, "--effort", level]);
+        assert_eq!(out.status.code(), Some(2), "--effort {level}");
+        assert!(!Path::new(o).exists());
+    }
     assert_refused(
         &gsi_stdin(&["encode", "-", "-o", o], b"not an image"),
         "junk",

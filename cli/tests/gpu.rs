@@ -319,29 +319,36 @@ fn gradients_match(blend: Blend, w: u32, h: u32) {
 }
 
 /// A fit whose steps run on the GPU decodes (on the CPU) at the quality of the same fit on
-/// the CPU: within 0.5 dB, both blend modes.
+/// the CPU: within 0.5 dB, both blend modes, and with a coarse start (whose reduced fit
+/// runs on the GPU too, then hands its Gaussians to the full-resolution one).
 #[test]
 fn a_gpu_fit_matches_a_cpu_fit() {
-    use gsi::fit::{encode, Budget, EncodeOptions};
+    use gsi::fit::{encode, Budget, Coarse, EncodeOptions};
     use gsi::Device;
     let Some(gpu) = gpu() else { return };
     // A target with detail at several scales: the render of random Gaussians.
     let source = random_scene(21, SceneSpec::new(96, 64, 600, Blend::Sum));
     let mut target = gsi::render::render(&source, 96, 64).unwrap();
     target.data.iter_mut().for_each(|v| *v = v.clamp(0.0, 1.0));
-    for blend in [Blend::Sum, Blend::Alpha] {
+    let half = Some(Coarse {
+        factor: 2,
+        fraction: 0.5,
+    });
+    for (blend, coarse) in [(Blend::Sum, None), (Blend::Alpha, None), (Blend::Sum, half)] {
         let opts = EncodeOptions {
             budget: Budget::Gaussians(250),
             iterations: 150,
             blend,
+            coarse,
             ..EncodeOptions::default()
         };
         let cpu = encode(&target, &opts, gsi::Device::Cpu, &mut |_| {}).unwrap();
         let on_gpu = encode(&target, &opts, Device::Gpu(&gpu), &mut |_| {}).unwrap();
         eprintln!(
-            "{blend:?}: CPU fit {:.2} dB, GPU fit {:.2} dB",
+            "{blend:?} {coarse:?}: CPU fit {:.2} dB, GPU fit {:.2} dB",
             cpu.psnr, on_gpu.psnr
         );
+        assert_eq!(on_gpu.fallback, None);
         assert!(
             cpu.psnr > 20.0,
             "{blend:?}: the CPU fit itself failed ({:.2} dB)",

@@ -14,7 +14,12 @@
 //!
 //! `--bpp` and `--target-psnr` choose N: a file over its byte budget loses its least
 //! useful Gaussians and is fine-tuned again; a file under its quality target grows.
+//!
+//! With [`Coarse`], step 3 starts on a copy of the image reduced in each direction,
+//! where a step costs a fraction of a full one, and the full-resolution steps refine what
+//! it found ([`effort`] chooses how much of each).
 
+pub mod effort;
 mod error;
 pub mod init;
 pub mod loss;
@@ -29,6 +34,7 @@ pub mod raster;
 pub(crate) mod resident;
 
 pub use crate::optim::LearningRates;
+pub use effort::Effort;
 pub use error::Error;
 pub use init::Init;
 pub use loss::Loss;
@@ -56,7 +62,10 @@ pub enum Budget {
 #[derive(Clone, Debug)]
 pub struct EncodeOptions {
     pub budget: Budget,
+    /// Optimizer steps of the first pass, the coarse ones included.
     pub iterations: u32,
+    /// Fit a reduced copy of the image first (`None`: every step at full resolution).
+    pub coarse: Option<Coarse>,
     pub init: Init,
     pub blend: Blend,
     pub seed: u64,
@@ -68,13 +77,28 @@ pub struct EncodeOptions {
     pub qat_fraction: f32,
     /// Prune and re-place Gaussians during fitting.
     pub densify: bool,
+    /// Conjugate-gradient iterations of each least-squares colour solve (after pruning
+    /// and re-placement, and after the coarse steps); the first solve takes twice as many.
+    pub color_solve: u32,
+}
+
+/// Coarse-to-fine fitting: the first `fraction` of the iterations fit the image reduced
+/// `factor` times in each direction (each output pixel the mean of a `factor`² block).
+/// Positions and covariances are stored relative to the image, so the coarse fit is a
+/// start for the full one as it is; a coarse step costs about `1/factor²` of a full one.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Coarse {
+    pub factor: u32,
+    pub fraction: f32,
 }
 
 impl Default for EncodeOptions {
+    /// The options of [`Effort::DEFAULT`] (test `default_options_are_the_default_effort`).
     fn default() -> Self {
         EncodeOptions {
             budget: Budget::Bpp(1.0),
             iterations: 400,
+            coarse: None,
             init: Init::Adaptive,
             blend: Blend::Sum,
             seed: 0,
@@ -91,6 +115,7 @@ impl Default for EncodeOptions {
             bits: None,
             qat_fraction: 0.2,
             densify: true,
+            color_solve: 10,
         }
     }
 }
@@ -105,6 +130,9 @@ pub struct Progress {
     /// PSNR (dB, 8-bit) of the current render; of the quantized one during fine-tuning.
     pub psnr: f64,
     pub seconds: f64,
+    /// Share of this pass's work done, in `[0, 1]`: a coarse step counts for the share of
+    /// the pixels it renders, so that time left is about `seconds · (1 − work) / work`.
+    pub work: f64,
 }
 
 /// The result of an encode.
@@ -231,13 +259,41 @@ impl<'a> Fitter<'a> {
         loss: Loss,
         seed: u64,
     ) -> Fitter<'a> {
+        Fitter::started(target, n, init, blend, loss, seed, 20)
+    }
+
+    /// [`Fitter::new`] with `solve` iterations of the first colour solve.
+    fn started(
+        target: &'a Target,
+        n: usize,
+        init: Init,
+        blend: Blend,
+        loss: Loss,
+        seed: u64,
+        solve: usize,
+    ) -> Fitter<'a> {
         let params = init::initialize(target, n, init, blend, seed);
-        let adam = Adam::new(&params);
-        let mut f = Fitter {
+        let mut f = Fitter::with_params(target, params, blend, loss, seed);
+        if init == Init::Adaptive {
+            f.solve_colors(solve);
+        }
+        f
+    }
+
+    /// A fitter that starts from `params` (relative to the image, so those of another
+    /// resolution of the same image serve), with a fresh optimizer.
+    pub fn with_params(
+        target: &'a Target,
+        params: GaussianSet,
+        blend: Blend,
+        loss: Loss,
+        seed: u64,
+    ) -> Fitter<'a> {
+        Fitter {
             target,
             blend,
+            adam: Adam::new(&params),
             params,
-            adam,
             loss: loss::LossFn::new(loss),
             seed,
             fallback: None,
@@ -247,11 +303,7 @@ impl<'a> Fitter<'a> {
             gpu: None,
             #[cfg(feature = "gpu")]
             resident: None,
-        };
-        if init == Init::Adaptive {
-            f.solve_colors(20);
         }
-        f
     }
 
     fn scene_of(&self, g: GaussianSet) -> Scene {
@@ -592,6 +644,168 @@ fn schedule(it: u32, total: u32) -> f32 {
     0.05 + 0.95 * 0.5 * (1.0 + (std::f32::consts::PI * t).cos())
 }
 
+/// One run of optimizer steps with its own learning-rate schedule, and where it sits in
+/// the pass that the progress reports count.
+#[derive(Clone, Copy)]
+struct Phase {
+    steps: u32,
+    /// Steps of the pass before this run.
+    first: u32,
+    /// Steps of the whole pass.
+    all: u32,
+    /// The work of one step, and the pass's work before this run and in all.
+    step_work: f64,
+    work_before: f64,
+    work_all: f64,
+    /// Whether the last `qat_fraction` of the steps render the quantized parameters.
+    qat: bool,
+}
+
+impl Phase {
+    /// A pass of `steps` full-resolution steps in one run.
+    fn whole(steps: u32, qat: bool) -> Phase {
+        Phase {
+            steps,
+            first: 0,
+            all: steps,
+            step_work: 1.0,
+            work_before: 0.0,
+            work_all: f64::from(steps),
+            qat,
+        }
+    }
+}
+
+/// Runs the optimizer for [`encode`]: pruning and re-placement at fixed points of each run,
+/// quantization-aware steps at its end, progress reports, and the early stop of a PSNR
+/// target.
+struct Runner<'o, 'p> {
+    opts: &'o EncodeOptions,
+    bits: BitDepths,
+    stop_at: Option<f64>,
+    start: std::time::Instant,
+    on_progress: &'p mut dyn FnMut(&Progress),
+    curve: Vec<Progress>,
+}
+
+impl Runner<'_, '_> {
+    fn run(&mut self, fitter: &mut Fitter<'_>, phase: Phase) {
+        let opts = self.opts;
+        let total = phase.steps;
+        let qat_from = if phase.qat {
+            ((1.0 - opts.qat_fraction) * total as f32) as u32
+        } else {
+            u32::MAX
+        };
+        let densify_at = [total / 4, total / 2];
+        // Measurements may come a step late (a GPU fit's): each says which step it is.
+        let base = fitter.steps;
+        for it in 0..total {
+            if opts.densify && densify_at.contains(&it) && it > 0 {
+                let n_now = fitter.params.len();
+                fitter.prune_and_grow(0.5, n_now, n_now);
+                if opts.blend == Blend::Sum || opts.init == Init::Adaptive {
+                    fitter.solve_colors(opts.color_solve as usize);
+                }
+            }
+            let qat = (it >= qat_from).then_some(self.bits);
+            let measure = it % 10 == 0 || it + 1 == total;
+            let done = fitter.step(&opts.lr.scaled(schedule(it, total)), qat, measure);
+            if done.is_some_and(|m| self.measured(m, base, fitter, phase, qat_from)) {
+                break;
+            }
+        }
+        while let Some(m) = fitter.flush() {
+            self.measured(m, base, fitter, phase, qat_from);
+        }
+    }
+
+    /// Report a measurement; whether the PSNR target is reached (by a quantization-aware
+    /// step).
+    fn measured(
+        &mut self,
+        m: Measured,
+        base: u64,
+        fitter: &Fitter,
+        phase: Phase,
+        qat_from: u32,
+    ) -> bool {
+        let it = (m.step - base) as u32;
+        let work = phase.work_before + f64::from(it) * phase.step_work;
+        let p = Progress {
+            iteration: phase.first + it,
+            total: phase.all,
+            gaussians: fitter.params.len(),
+            loss: m.loss,
+            psnr: m.psnr,
+            seconds: self.start.elapsed().as_secs_f64(),
+            work: (work / phase.work_all.max(1e-9)).clamp(0.0, 1.0),
+        };
+        (self.on_progress)(&p);
+        self.curve.push(p);
+        self.stop_at.is_some_and(|p| it > qat_from && m.psnr >= p)
+    }
+}
+
+/// `target` reduced `factor` times in each direction: each pixel the mean of its block
+/// (blocks cut by the right and bottom edges average what they hold).
+fn reduced(target: &Target, factor: u32) -> Target {
+    let (w, h) = (target.width as usize, target.height as usize);
+    let f = factor.max(1) as usize;
+    let (rw, rh) = (w.div_ceil(f), h.div_ceil(f));
+    let mut data = vec![0f32; rw * rh * 3];
+    let mut count = vec![0u32; rw * rh];
+    for y in 0..h {
+        for x in 0..w {
+            let o = (y / f) * rw + x / f;
+            count[o] += 1;
+            for c in 0..3 {
+                data[o * 3 + c] += target.data[(y * w + x) * 3 + c];
+            }
+        }
+    }
+    for (px, &k) in data.chunks_exact_mut(3).zip(&count) {
+        px.iter_mut().for_each(|v| *v /= k as f32);
+    }
+    Target {
+        width: rw as u32,
+        height: rh as u32,
+        data,
+    }
+}
+
+/// The reduced target of `coarse` and its steps for a fit of `n` Gaussians in `iterations`
+/// steps, or `None` where there is none: no coarse steps, or a reduced image under 16
+/// pixels a side or with fewer than two pixels a Gaussian (then it cannot say where they
+/// go). At least one step is left for the full resolution.
+fn coarse_start(
+    target: &Target,
+    coarse: Option<Coarse>,
+    n: usize,
+    iterations: u32,
+) -> Option<(Target, u32)> {
+    let c = coarse?;
+    let steps = (iterations as f32 * c.fraction.clamp(0.0, 1.0)) as u32;
+    let steps = steps.min(iterations.saturating_sub(1));
+    let (rw, rh) = (
+        target.width.div_ceil(c.factor.max(1)),
+        target.height.div_ceil(c.factor.max(1)),
+    );
+    let fits = rw >= 16 && rh >= 16 && n.saturating_mul(2) <= rw as usize * rh as usize;
+    (c.factor >= 2 && steps > 0 && fits).then(|| (reduced(target, c.factor), steps))
+}
+
+/// Take `fitter`'s steps on `device`.
+fn on_device<'a>(fitter: &mut Fitter<'a>, device: crate::Device<'a>) {
+    match device {
+        crate::Device::Cpu => {}
+        #[cfg(feature = "gpu")]
+        crate::Device::Gpu(gpu) => fitter.use_gpu(gpu),
+        #[cfg(not(feature = "gpu"))]
+        crate::Device::_Lifetime(_) => {}
+    }
+}
+
 /// Fit `target` and write the file, with the optimizer steps on `device`.
 ///
 /// On a GPU ([`Fitter::use_gpu`]) the whole step runs there with the L2 loss, the render
@@ -615,76 +829,82 @@ pub fn encode(
         Budget::Bpp(b) => (((b * px / 8.0 - FILE_OVERHEAD) / per_g) as usize).clamp(1, max_n),
         Budget::TargetPsnr(_) => ((px / 400.0) as usize).clamp(4.min(max_n), max_n),
     };
-    let start = std::time::Instant::now();
-    let mut fitter = Fitter::new(target, n, opts.init, opts.blend, opts.loss, opts.seed);
+    let mut runner = Runner {
+        opts,
+        bits,
+        stop_at: match opts.budget {
+            Budget::TargetPsnr(p) => Some(f64::from(p)),
+            _ => None,
+        },
+        start: std::time::Instant::now(),
+        on_progress,
+        curve: Vec::new(),
+    };
+    let coarse = coarse_start(target, opts.coarse, n, opts.iterations);
+    let first = coarse.as_ref().map_or(target, |(t, _)| t);
+    let solve = 2 * opts.color_solve as usize;
+    let new_fitter =
+        |n| Fitter::started(first, n, opts.init, opts.blend, opts.loss, opts.seed, solve);
+    let mut fitter = new_fitter(n);
     if let Budget::Bpp(b) = opts.budget {
         // Method 2's cost depends on the image: measure it on the initial Gaussians, which
         // code within about 2 % of the fitted ones (1.5 % more on kodim05, 1.1 % on
         // kodim23), and start again with the count that this cost fits in the budget.
-        let per_g = coded_bytes_per_gaussian(&fitter.scene(), bits) * 1.02;
+        let scene = Scene {
+            width: w,
+            height: h,
+            ..fitter.scene()
+        };
+        let per_g = coded_bytes_per_gaussian(&scene, bits) * 1.02;
         let fits = (((b * px / 8.0 - FILE_OVERHEAD) / per_g) as usize).clamp(1, max_n);
         if fits.abs_diff(n) * 50 > n {
             n = fits;
-            fitter = Fitter::new(target, n, opts.init, opts.blend, opts.loss, opts.seed);
+            fitter = new_fitter(n);
         }
     }
-    match device {
-        crate::Device::Cpu => {}
-        #[cfg(feature = "gpu")]
-        crate::Device::Gpu(gpu) => fitter.use_gpu(gpu),
-        #[cfg(not(feature = "gpu"))]
-        crate::Device::_Lifetime(_) => {}
-    }
-    let mut curve = Vec::new();
-    let mut report =
-        |it: u32, total: u32, n: usize, loss: f32, psnr: f64, curve: &mut Vec<Progress>| {
-            let p = Progress {
-                iteration: it,
-                total,
-                gaussians: n,
-                loss,
-                psnr,
-                seconds: start.elapsed().as_secs_f64(),
+    on_device(&mut fitter, device);
+    let mut fitter = match &coarse {
+        None => {
+            runner.run(&mut fitter, Phase::whole(opts.iterations, true));
+            fitter
+        }
+        Some((reduced, steps)) => {
+            // Coarse steps count for the share of the pixels they render.
+            let step_work = f64::from(reduced.width * reduced.height) / f64::from(w * h);
+            let fine = opts.iterations - steps;
+            let work_all = f64::from(*steps) * step_work + f64::from(fine);
+            let mut phase = Phase {
+                steps: *steps,
+                first: 0,
+                all: opts.iterations,
+                step_work,
+                work_before: 0.0,
+                work_all,
+                qat: false,
             };
-            on_progress(&p);
-            curve.push(p);
-        };
-    let mut run =
-        |fitter: &mut Fitter, total: u32, curve: &mut Vec<Progress>, stop_at: Option<f64>| {
-            let qat_from = ((1.0 - opts.qat_fraction) * total as f32) as u32;
-            let densify_at = [total / 4, total / 2];
-            // Measurements may come a step late (a GPU fit's): each says which step it is.
-            let base = fitter.steps;
-            let mut on_measured = |m: Measured, fitter: &Fitter, curve: &mut Vec<Progress>| {
-                let it = (m.step - base) as u32;
-                report(it, total, fitter.params.len(), m.loss, m.psnr, curve);
-                // Stop once a quantization-aware step reaches the target.
-                stop_at.is_some_and(|p| it > qat_from && m.psnr >= p)
-            };
-            for it in 0..total {
-                if opts.densify && densify_at.contains(&it) && it > 0 {
-                    let n_now = fitter.params.len();
-                    fitter.prune_and_grow(0.5, n_now, n_now);
-                    if opts.blend == Blend::Sum || opts.init == Init::Adaptive {
-                        fitter.solve_colors(10);
-                    }
-                }
-                let qat = (it >= qat_from).then_some(bits);
-                let measure = it % 10 == 0 || it + 1 == total;
-                let done = fitter.step(&opts.lr.scaled(schedule(it, total)), qat, measure);
-                if done.is_some_and(|m| on_measured(m, fitter, curve)) {
-                    break;
-                }
+            runner.run(&mut fitter, phase);
+            fitter.sync();
+            let fallback = fitter.fallback.take();
+            let params = std::mem::take(&mut fitter.params);
+            drop(fitter);
+            let mut full = Fitter::with_params(target, params, opts.blend, opts.loss, opts.seed);
+            full.fallback = fallback;
+            if full.fallback.is_none() {
+                on_device(&mut full, device);
             }
-            while let Some(m) = fitter.flush() {
-                on_measured(m, fitter, curve);
+            if opts.blend == Blend::Sum || opts.init == Init::Adaptive {
+                full.solve_colors(opts.color_solve as usize);
             }
-        };
-    let stop_at = match opts.budget {
-        Budget::TargetPsnr(p) => Some(f64::from(p)),
-        _ => None,
+            phase.work_before = f64::from(*steps) * step_work;
+            phase.first = *steps;
+            phase.steps = fine;
+            phase.step_work = 1.0;
+            phase.qat = true;
+            runner.run(&mut full, phase);
+            full
+        }
     };
-    run(&mut fitter, opts.iterations, &mut curve, stop_at);
+    let fine_steps = opts.iterations - coarse.as_ref().map_or(0, |c| c.1);
     let mut result = finish(&mut fitter, bits, opts)?;
     // Budgets: shrink to the byte budget, or grow to the quality target.
     for _ in 0..4 {
@@ -703,16 +923,11 @@ pub fn encode(
                 }
                 n = (fitter.params.len() * 8 / 5).min(max_n);
                 fitter.prune_and_grow(0.0, usize::MAX, n);
-                fitter.solve_colors(10);
+                fitter.solve_colors(opts.color_solve as usize);
             }
             Budget::Gaussians(_) => break,
         }
-        run(
-            &mut fitter,
-            (opts.iterations / 3).max(1),
-            &mut curve,
-            stop_at,
-        );
+        runner.run(&mut fitter, Phase::whole((fine_steps / 3).max(1), true));
         result = finish(&mut fitter, bits, opts)?;
     }
     // A budget the passes above missed is met by pruning alone; one that even a single
@@ -733,7 +948,7 @@ pub fn encode(
         fitter.prune_and_grow(0.0, n, 0);
         result = finish(&mut fitter, bits, opts)?;
     }
-    result.curve = curve;
+    result.curve = runner.curve;
     result.fallback = fitter.fallback.take();
     Ok(result)
 }
@@ -758,7 +973,7 @@ fn finish(fitter: &mut Fitter, bits: BitDepths, opts: &EncodeOptions) -> Result<
     let psnr = loss::psnr8(&decoded.data, &t.data, t.width, t.height);
     let float = crate::render::render(&scene, t.width, t.height)?;
     let float_psnr = loss::psnr8(&float.data, &t.data, t.width, t.height);
-    let settings = format!(
+    let mut settings = format!(
         "encoder=gsi {}\ninit={:?}\niterations={}\nseed={}\nbudget={:?}\nloss={:?}\nbits={}/{}/{}/{}",
         env!("CARGO_PKG_VERSION"),
         opts.init,
@@ -771,6 +986,13 @@ fn finish(fitter: &mut Fitter, bits: BitDepths, opts: &EncodeOptions) -> Result<
         bits.color,
         bits.opacity
     );
+    // Written only where used, so that files of the settings before them stay the same.
+    if let Some(c) = opts.coarse {
+        settings += &format!("\ncoarse={}/{}", c.factor, c.fraction);
+    }
+    if opts.color_solve != 10 {
+        settings += &format!("\ncolor_solve={}", opts.color_solve);
+    }
     let bytes = format::to_bytes(
         &records,
         &WriteOptions {

@@ -2,6 +2,7 @@
 
 use super::params::chain;
 use super::raster::{backward, forward, Need};
+use super::{Coarse, Effort, EncodeOptions};
 use crate::model::{Blend, CovParam, GaussianSet, Scene};
 use crate::optim::zeros_like as zero_grads;
 use crate::render::{project_scene, render};
@@ -208,4 +209,34 @@ fn quantization_aware_steps_keep_unstored_opacities() {
         .filter(|&&o| o < 1.0)
         .count();
     assert!(moved > 0, "no opacity moved");
+}
+
+#[test]
+fn default_options_are_the_default_effort() {
+    let mut leveled = EncodeOptions {
+        iterations: 1,
+        coarse: Some(Coarse {
+            factor: 3,
+            fraction: 0.9,
+        }),
+        color_solve: 1,
+        ..EncodeOptions::default()
+    };
+    Effort::DEFAULT.apply(&mut leveled);
+    assert_eq!(
+        format!("{leveled:?}"),
+        format!("{:?}", EncodeOptions::default())
+    );
+    // Levels order time: steps never fall and the coarse share never grows.
+    let steps: Vec<(u32, f32)> = (1..=9)
+        .map(|l| {
+            let mut o = EncodeOptions::default();
+            Effort::new(l).unwrap().apply(&mut o);
+            (o.iterations, o.coarse.map_or(0.0, |c| c.fraction))
+        })
+        .collect();
+    assert!(steps
+        .windows(2)
+        .all(|w| w[0].0 <= w[1].0 && w[0].1 >= w[1].1));
+    assert_eq!((Effort::new(0), Effort::new(10)), (None, None));
 }

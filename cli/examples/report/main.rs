@@ -3,7 +3,7 @@
 //! ```sh
 //! cargo run --release --example report -- [--kodak DIR] [--lol DIR] [--bpp 0.5,1.0]
 //!     [--iterations T] [--limit N] [--curve-image FILE] [--curve-iterations T] [--out DIR]
-//!     [--quick | --enhance-only]
+//!     [--quick | --enhance-only | --effort-only] [--efforts 1,3,5,7,9] [--effort-keep]
 //! ```
 //!
 //! For every image and bpp target it encodes, decodes and scores the file, and makes a
@@ -13,7 +13,10 @@
 //! `report:encode` markers of BENCHMARKS.md is rewritten, with the machine and commit.
 //! The stage-2 section (`report:enhance`, `DIR/enhance.json`, the example figure and the
 //! per-image plot) encodes, enhances, decodes and scores LOL eval15 (see `enhance.rs`).
+//! The effort section (`report:effort`, `DIR/effort.json`, `DIR/effort.svg`) times every
+//! `--effort` level on Kodak (see `effort.rs`).
 
+mod effort;
 mod enhance;
 // The report builds the synthetic set; the example `lowlight_set` also measures.
 #[allow(dead_code)]
@@ -39,6 +42,12 @@ struct Args {
     quick: bool,
     /// Only the stage-2 section (LOL eval15 encode → enhance → decode).
     enhance_only: bool,
+    /// Only the effort section.
+    effort_only: bool,
+    /// The effort levels the effort section times.
+    efforts: Vec<u8>,
+    /// Keep the levels of an earlier effort run that this one does not time.
+    effort_keep: bool,
 }
 
 fn parse_args() -> Args {
@@ -54,6 +63,9 @@ fn parse_args() -> Args {
         out: PathBuf::from("bench"),
         quick: false,
         enhance_only: false,
+        effort_only: false,
+        efforts: (1..=9).collect(),
+        effort_keep: false,
     };
     let mut it = std::env::args().skip(1);
     while let Some(flag) = it.next() {
@@ -77,6 +89,14 @@ fn parse_args() -> Args {
             "--out" => a.out = value().into(),
             "--quick" => a.quick = true,
             "--enhance-only" => a.enhance_only = true,
+            "--effort-only" => a.effort_only = true,
+            "--effort-keep" => a.effort_keep = true,
+            "--efforts" => {
+                a.efforts = value()
+                    .split(',')
+                    .map(|v| v.parse().expect("--efforts takes levels 1..=9"))
+                    .collect()
+            }
             other => panic!("unknown argument {other}"),
         }
     }
@@ -228,6 +248,18 @@ fn main() {
         }
         return;
     }
+    if args.effort_only {
+        if let Some(kodak) = &args.kodak {
+            effort::section(
+                kodak,
+                &args.out,
+                args.limit,
+                &args.efforts,
+                args.effort_keep,
+            );
+        }
+        return;
+    }
     replace_section("decode", &decoder_section(&stamp));
     if let Some(lol) = &lol_root {
         replace_section("metrics", &metrics_section(lol, &stamp));
@@ -299,6 +331,15 @@ fn main() {
     }
     if let Some(lol) = &lol_root {
         enhance::section(lol, args.kodak.as_deref(), &args.out, args.limit);
+    }
+    if let Some(kodak) = &args.kodak {
+        effort::section(
+            kodak,
+            &args.out,
+            args.limit,
+            &args.efforts,
+            args.effort_keep,
+        );
     }
     let curve = args.curve_image.as_ref().map(|p| init_curves(p, &args));
     write_outputs(&args, &rows, curve.as_ref(), &stamp);

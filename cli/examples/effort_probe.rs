@@ -1,0 +1,65 @@
+//! Time and PSNR of one encoder configuration on a few images: how the effort levels were
+//! chosen on a validation set (BENCHMARKS.md, session 8).
+//!
+//! ```sh
+//! cargo run --release -p gsi-cli --example effort_probe -- STEPS COARSE_SHARE FACTOR SOLVE IMAGE...
+//! ```
+//!
+//! Each image is encoded at 1 bpp on the CPU, one after another; a line per image, then the
+//! mean PSNR and median time. `COARSE_SHARE` 0 (or `FACTOR` 1) fits at full resolution only.
+
+use gsi::fit::{encode, Budget, Coarse, EncodeOptions, Target};
+use std::time::Instant;
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    if args.len() < 5 {
+        eprintln!("usage: effort_probe STEPS COARSE_SHARE FACTOR SOLVE IMAGE...");
+        std::process::exit(2);
+    }
+    let number = |k: usize| -> f32 {
+        args[k]
+            .parse()
+            .unwrap_or_else(|_| panic!("{} is not a number", args[k]))
+    };
+    let (fraction, factor) = (number(1), number(2) as u32);
+    let opts = EncodeOptions {
+        budget: Budget::Bpp(1.0),
+        iterations: number(0) as u32,
+        coarse: (fraction > 0.0 && factor > 1).then_some(Coarse { factor, fraction }),
+        color_solve: number(3) as u32,
+        ..EncodeOptions::default()
+    };
+    let (mut psnr, mut seconds) = (Vec::new(), Vec::new());
+    for path in &args[4..] {
+        let img = image::open(path)
+            .unwrap_or_else(|e| panic!("{path}: {e}"))
+            .into_rgb8();
+        let target = Target {
+            width: img.width(),
+            height: img.height(),
+            data: img
+                .into_raw()
+                .iter()
+                .map(|&v| f32::from(v) / 255.0)
+                .collect(),
+        };
+        let t0 = Instant::now();
+        let e = encode(&target, &opts, gsi::Device::Cpu, &mut |_| {}).expect("encode");
+        let s = t0.elapsed().as_secs_f64();
+        println!(
+            "{path}: N {}  {} bytes  {:.3} dB  {s:.2} s",
+            e.records.header.count,
+            e.bytes.len(),
+            e.psnr
+        );
+        psnr.push(e.psnr);
+        seconds.push(s);
+    }
+    seconds.sort_by(f64::total_cmp);
+    println!(
+        "mean PSNR {:.3} dB  median time {:.2} s",
+        psnr.iter().sum::<f64>() / psnr.len() as f64,
+        seconds[seconds.len() / 2]
+    );
+}
