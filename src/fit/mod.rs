@@ -131,7 +131,8 @@ pub struct Progress {
     pub psnr: f64,
     pub seconds: f64,
     /// Share of this pass's work done, in `[0, 1]`: a coarse step counts for the share of
-    /// the pixels it renders, so that time left is about `seconds · (1 − work) / work`.
+    /// the pixels it renders, so that the pass's time left is about its time so far
+    /// `· (1 − work) / work` (a bar that counted steps would run ahead during coarse ones).
     pub work: f64,
 }
 
