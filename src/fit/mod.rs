@@ -24,6 +24,7 @@ mod error;
 pub mod init;
 pub mod loss;
 // The pieces of a step: public for the benches that time them, not part of the API.
+mod lanes;
 #[doc(hidden)]
 pub mod lsq;
 #[doc(hidden)]

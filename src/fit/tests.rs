@@ -8,9 +8,16 @@ use crate::optim::zeros_like as zero_grads;
 use crate::render::{project_scene, render};
 use crate::synth::{random_scene, SceneSpec, SplitMix64};
 
+/// `alpha` blending renders with the decoder's own loops; `sum` with the lanes of
+/// `super::lanes`, whose `exp` differs from the platform's by under 2e-7 relative.
 #[test]
-fn forward_equals_the_decoder_bit_for_bit() {
-    for (seed, blend) in [(1, Blend::Sum), (2, Blend::Alpha), (3, Blend::Alpha)] {
+fn forward_matches_the_decoder() {
+    for (seed, blend) in [
+        (1, Blend::Sum),
+        (2, Blend::Alpha),
+        (3, Blend::Alpha),
+        (4, Blend::Sum),
+    ] {
         let scene = random_scene(
             seed,
             SceneSpec {
@@ -21,7 +28,17 @@ fn forward_equals_the_decoder_bit_for_bit() {
         for (w, h) in [(70, 45), (33, 17), (140, 90), (1, 1)] {
             let fwd = forward(&project_scene(&scene, w, h), blend, w, h);
             let want = render(&scene, w, h).unwrap();
-            assert!(fwd.image == want.data, "{blend:?} {w}x{h}");
+            if blend == Blend::Alpha {
+                assert!(fwd.image == want.data, "{blend:?} {w}x{h}");
+                continue;
+            }
+            let err = fwd
+                .image
+                .iter()
+                .zip(&want.data)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0f32, f32::max);
+            assert!(err < 1e-5, "{blend:?} {w}x{h}: max error {err}");
         }
     }
 }

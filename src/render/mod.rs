@@ -26,22 +26,8 @@ pub use project::{project, project_scene, PixelBox, Projected};
 #[cfg(any(feature = "encode", feature = "gpu"))]
 pub(crate) use tiles::TileLists;
 
-/// Render already-projected Gaussians into `out` (`width·height·3` floats, overwritten):
-/// the differentiable rasterizer shares this path so that fitting sees decoded pixels.
-#[cfg_attr(not(feature = "encode"), allow(dead_code))]
-pub(crate) fn render_projected(
-    proj: &[Projected],
-    blend: model::Blend,
-    width: u32,
-    height: u32,
-    out: &mut [f32],
-) {
-    let parallel = cfg!(feature = "parallel");
-    cpu::render_projected::<cpu::RgbF32>(proj, blend, width, height, out, parallel);
-}
-
 use crate::format::{Error, ErrorKind, Limits, Result};
-use crate::model::{self, Scene};
+use crate::model::Scene;
 
 /// Side of a square tile, in pixels.
 pub const TILE: u32 = 16;
