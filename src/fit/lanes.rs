@@ -389,13 +389,7 @@ mod tests {
         let tiles = TileLists::bin(&proj, w, h);
         let mut rng = SplitMix64::new(3);
         for t in 0..tiles.len() {
-            let (tx, ty) = (t as u32 % tiles.tiles_x, t as u32 / tiles.tiles_x);
-            let rect = Rect {
-                x0: tx * TILE,
-                x1: ((tx + 1) * TILE).min(w),
-                y0: ty * TILE,
-                y1: ((ty + 1) * TILE).min(h),
-            };
+            let rect = Rect::of_tile(t, tiles.tiles_x, w, h);
             let list = tiles.list(t);
             let (mut a, mut b) = (Planes::zero(), Planes::zero());
             forward_generic(list, &proj, rect, &mut a);

@@ -71,7 +71,7 @@ pub struct Forward {
 }
 
 impl Rect {
-    fn of_tile(t: usize, tiles_x: u32, width: u32, height: u32) -> Rect {
+    pub(super) fn of_tile(t: usize, tiles_x: u32, width: u32, height: u32) -> Rect {
         let (tx, ty) = (t as u32 % tiles_x, t as u32 / tiles_x);
         Rect {
             x0: tx * TILE,
