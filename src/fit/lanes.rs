@@ -175,7 +175,20 @@ impl Footprint<'_> {
         }
         (alpha, dxs)
     }
+
+    /// The offsets from the centre of the columns of chunk `c`, as [`Footprint::alphas`]
+    /// computes them.
+    #[inline(always)]
+    fn dxs(&self, c: usize) -> V {
+        let x0 = (self.x0 as usize + c * LANES) as f32 + 0.5;
+        std::array::from_fn(|l| (x0 + l as f32) - self.g.mean[0])
+    }
 }
+
+/// Most Gaussians in a tile list whose alphas a fused step keeps ([`forward_tile`]'s
+/// `kept`): each keeps at most a tile's worth (1 KiB), so a thread holds at most 16 MiB;
+/// a longer list (Gaussians far larger than tiles) is evaluated again instead.
+pub(super) const KEPT_LIST_MAX: usize = 16 * 1024;
 
 /// The least value of `Q = A dx² + 2B dx dy + C dy²` (`-2·power`, a positive definite
 /// form) over the rectangle `dx ∈ [dxs[0], dxs[1]]`, `dy ∈ [dys[0], dys[1]]`: 0 when it
@@ -204,8 +217,15 @@ fn total(v: &V) -> f32 {
     v.iter().fold(0.0, |s, x| s + x)
 }
 
+/// With `KEEP`, the alphas are appended to `kept` as they are computed.
 #[inline(always)]
-fn forward_generic(list: &[u32], proj: &[Projected], rect: Rect, acc: &mut Planes) {
+fn forward_generic<const KEEP: bool>(
+    list: &[u32],
+    proj: &[Projected],
+    rect: Rect,
+    acc: &mut Planes,
+    kept: &mut Vec<f32>,
+) {
     for &k in list {
         let g = &proj[k as usize];
         let Some(f) = Footprint::of(g, rect) else {
@@ -215,6 +235,9 @@ fn forward_generic(list: &[u32], proj: &[Projected], rect: Rect, acc: &mut Plane
             for j in f.ys.clone() {
                 let dy = (j as f32 + 0.5) - g.mean[1];
                 let (alpha, _) = f.alphas(chunk, dy);
+                if KEEP {
+                    kept.extend_from_slice(&alpha);
+                }
                 let at = (j - rect.y0) as usize * TILE_W + chunk.0 * LANES;
                 for (ch, plane) in acc.0.iter_mut().enumerate() {
                     let px = &mut plane[at..at + LANES];
@@ -229,16 +252,19 @@ fn forward_generic(list: &[u32], proj: &[Projected], rect: Rect, acc: &mut Plane
 
 /// The gradient sums of one Gaussian over a tile, before the chain rule's constants:
 /// `color[ch] = Σ alpha·d[ch]` and, with `q = alpha·(colour · d)`, `mean` and `conic`
-/// as in [`super::raster::ProjGrad`], `opacity = Σ q / o`.
+/// as in [`super::raster::ProjGrad`], `opacity = Σ q / o`. With `KEPT`, the alphas are
+/// read from `kept`, the stream the forward pass over this tile kept.
 #[inline(always)]
-fn backward_generic<const ALL: bool>(
+fn backward_generic<const ALL: bool, const KEPT: bool>(
     list: &[u32],
     proj: &[Projected],
     rect: Rect,
     d: &Planes,
     out: &mut [super::raster::ProjGrad],
+    kept: &[f32],
 ) {
     let [dr, dg, db] = &d.0;
+    let mut kept = kept.chunks_exact(LANES);
     for (slot, &k) in out.iter_mut().zip(list) {
         let g = &proj[k as usize];
         let Some(f) = Footprint::of(g, rect) else {
@@ -250,9 +276,16 @@ fn backward_generic<const ALL: bool>(
         let (mut c0, mut c1, mut c2) = (z, z, z);
         let (mut gx, mut gy, mut ga, mut gb, mut gc, mut go) = (z, z, z, z, z, z);
         for chunk in f.chunks() {
+            let dx_kept = f.dxs(chunk.0);
             for j in f.ys.clone() {
                 let dy = (j as f32 + 0.5) - g.mean[1];
-                let (alpha, dx) = f.alphas(chunk, dy);
+                let (alpha, dx) = if KEPT {
+                    // The forward pass kept a chunk for every chunk and row walked here.
+                    let a = kept.next().unwrap_or(&[0.0; LANES][..]);
+                    (std::array::from_fn(|l| a[l]), dx_kept)
+                } else {
+                    f.alphas(chunk, dy)
+                };
                 let at = (j - rect.y0) as usize * TILE_W + chunk.0 * LANES;
                 let (r, gg, b) = (
                     &dr[at..at + LANES],
@@ -287,19 +320,28 @@ fn backward_generic<const ALL: bool>(
 }
 
 /// Add the `sum` render of the Gaussians `list` (indices into `proj`, in order) over
-/// tile `rect` to `acc`.
-pub(super) fn forward_tile(list: &[u32], proj: &[Projected], rect: Rect, acc: &mut Planes) {
+/// tile `rect` to `acc`; with `kept`, append the alphas to it for the backward pass.
+pub(super) fn forward_tile(
+    list: &[u32],
+    proj: &[Projected],
+    rect: Rect,
+    acc: &mut Planes,
+    kept: Option<&mut Vec<f32>>,
+) {
     #[cfg(target_arch = "x86_64")]
     if std::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU has AVX2, checked just above.
-        return unsafe { avx2::forward(list, proj, rect, acc) };
+        return unsafe { avx2::forward(list, proj, rect, acc, kept) };
     }
-    forward_generic(list, proj, rect, acc)
+    match kept {
+        Some(kept) => forward_generic::<true>(list, proj, rect, acc, kept),
+        None => forward_generic::<false>(list, proj, rect, acc, &mut Vec::new()),
+    }
 }
 
 /// The gradient of each Gaussian of `list` over tile `rect` (`out[i]` for `list[i]`),
 /// given `d`, the loss's gradient with respect to the tile's pixels; colours only unless
-/// `all`.
+/// `all`. `kept`: the alphas the forward pass over this tile kept, if it did.
 pub(super) fn backward_tile(
     list: &[u32],
     proj: &[Projected],
@@ -307,15 +349,32 @@ pub(super) fn backward_tile(
     d: &Planes,
     out: &mut [super::raster::ProjGrad],
     all: bool,
+    kept: Option<&[f32]>,
 ) {
     #[cfg(target_arch = "x86_64")]
     if std::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU has AVX2, checked just above.
-        return unsafe { avx2::backward(list, proj, rect, d, out, all) };
+        return unsafe { avx2::backward(list, proj, rect, d, out, all, kept) };
     }
-    match all {
-        true => backward_generic::<true>(list, proj, rect, d, out),
-        false => backward_generic::<false>(list, proj, rect, d, out),
+    backward_any(list, proj, rect, d, out, all, kept)
+}
+
+/// [`backward_generic`] with its switches picked at run time.
+#[inline(always)]
+fn backward_any(
+    list: &[u32],
+    proj: &[Projected],
+    rect: Rect,
+    d: &Planes,
+    out: &mut [super::raster::ProjGrad],
+    all: bool,
+    kept: Option<&[f32]>,
+) {
+    match (all, kept) {
+        (true, Some(k)) => backward_generic::<true, true>(list, proj, rect, d, out, k),
+        (false, Some(k)) => backward_generic::<false, true>(list, proj, rect, d, out, k),
+        (true, None) => backward_generic::<true, false>(list, proj, rect, d, out, &[]),
+        (false, None) => backward_generic::<false, false>(list, proj, rect, d, out, &[]),
     }
 }
 
@@ -326,8 +385,17 @@ mod avx2 {
     use crate::fit::raster::ProjGrad;
 
     #[target_feature(enable = "avx2")]
-    pub(super) fn forward(list: &[u32], proj: &[Projected], rect: Rect, acc: &mut Planes) {
-        forward_generic(list, proj, rect, acc)
+    pub(super) fn forward(
+        list: &[u32],
+        proj: &[Projected],
+        rect: Rect,
+        acc: &mut Planes,
+        kept: Option<&mut Vec<f32>>,
+    ) {
+        match kept {
+            Some(kept) => forward_generic::<true>(list, proj, rect, acc, kept),
+            None => forward_generic::<false>(list, proj, rect, acc, &mut Vec::new()),
+        }
     }
 
     #[target_feature(enable = "avx2")]
@@ -338,11 +406,9 @@ mod avx2 {
         d: &Planes,
         out: &mut [ProjGrad],
         all: bool,
+        kept: Option<&[f32]>,
     ) {
-        match all {
-            true => backward_generic::<true>(list, proj, rect, d, out),
-            false => backward_generic::<false>(list, proj, rect, d, out),
-        }
+        backward_any(list, proj, rect, d, out, all, kept)
     }
 }
 
@@ -366,7 +432,8 @@ mod tests {
         assert!(exp(1.0) == 1.0 && exp(-1e9) > 0.0 && exp(-1e9) < 1e-37);
     }
 
-    /// The module's promise: a fit gives the same file with or without AVX2.
+    /// The module's promise: a fit gives the same file with or without AVX2, and with or
+    /// without the alphas kept from the forward pass.
     #[cfg(target_arch = "x86_64")]
     #[test]
     fn avx2_gives_the_bits_of_the_portable_loops() {
@@ -392,10 +459,11 @@ mod tests {
             let rect = Rect::of_tile(t, tiles.tiles_x, w, h);
             let list = tiles.list(t);
             let (mut a, mut b) = (Planes::zero(), Planes::zero());
-            forward_generic(list, &proj, rect, &mut a);
+            let (mut kept_a, mut kept_b) = (Vec::new(), Vec::new());
+            forward_generic::<true>(list, &proj, rect, &mut a, &mut kept_a);
             // SAFETY: the CPU has AVX2, checked above.
-            unsafe { avx2::forward(list, &proj, rect, &mut b) };
-            assert!(a.0 == b.0, "forward, tile {t}");
+            unsafe { avx2::forward(list, &proj, rect, &mut b, Some(&mut kept_b)) };
+            assert!(a.0 == b.0 && kept_a == kept_b, "forward, tile {t}");
             let mut d = Planes::zero();
             d.0.iter_mut()
                 .flatten()
@@ -403,12 +471,9 @@ mod tests {
             for all in [true, false] {
                 let mut ga = vec![ProjGrad::default(); list.len()];
                 let mut gb = ga.clone();
-                match all {
-                    true => backward_generic::<true>(list, &proj, rect, &d, &mut ga),
-                    false => backward_generic::<false>(list, &proj, rect, &d, &mut ga),
-                }
+                backward_any(list, &proj, rect, &d, &mut ga, all, None);
                 // SAFETY: as above.
-                unsafe { avx2::backward(list, &proj, rect, &d, &mut gb, all) };
+                unsafe { avx2::backward(list, &proj, rect, &d, &mut gb, all, Some(&kept_b)) };
                 assert!(ga == gb, "backward, tile {t}, all {all}");
             }
         }

@@ -43,6 +43,46 @@ fn forward_matches_the_decoder() {
     }
 }
 
+/// The fused step (`sum`, L2) gives the image and gradients of the three passes run one
+/// after the other, bit for bit, with and without the alphas kept (a tile list longer
+/// than `KEPT_LIST_MAX` is evaluated again).
+#[test]
+fn fused_step_gives_the_gradients_of_the_passes() {
+    use super::lanes::KEPT_LIST_MAX;
+    use super::loss::{Loss, LossFn};
+    use super::raster::step_l2_sum;
+    let cases = [
+        (5, 400, vec![(70, 45), (33, 17), (16, 16), (1, 1)]),
+        (6, KEPT_LIST_MAX + 10, vec![(5, 3)]),
+    ];
+    for (seed, n, sizes) in cases {
+        let scene = random_scene(
+            seed,
+            SceneSpec {
+                sigma_px: (0.3, 12.0),
+                ..SceneSpec::new(70, 45, n, Blend::Sum)
+            },
+        );
+        for (w, h) in sizes {
+            let mut rng = SplitMix64::new(seed + u64::from(w));
+            let target: Vec<f32> = (0..w * h * 3).map(|_| rng.range(0.0, 1.0)).collect();
+            let proj = project_scene(&scene, w, h);
+            let fwd = forward(&proj, Blend::Sum, w, h);
+            let (value, dl) = LossFn::new(Loss::L2).eval(&fwd.image, &target, w, h);
+            let want = backward(&fwd, &proj, &dl, Need::All);
+            let got = step_l2_sum(&proj, &target, w, h);
+            assert!(got.image == fwd.image, "{n} Gaussians, {w}x{h}: image");
+            assert!(got.grads == want, "{n} Gaussians, {w}x{h}: gradients");
+            let rel = (got.loss - value).abs() / value.max(1e-12);
+            assert!(
+                rel < 1e-5,
+                "{n} Gaussians, {w}x{h}: loss {} vs {value}",
+                got.loss
+            );
+        }
+    }
+}
+
 /// A scene on which the loss is smooth: every Gaussian covers every pixel with
 /// `alpha` well above the cut-off and below the `alpha` cap, so finite differences do
 /// not cross a threshold.
