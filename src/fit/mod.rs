@@ -803,6 +803,7 @@ fn coarse_start(
 }
 
 /// Take `fitter`'s steps on `device`.
+#[cfg_attr(not(feature = "gpu"), allow(unused_variables))]
 fn on_device<'a>(fitter: &mut Fitter<'a>, device: crate::Device<'a>) {
     match device {
         crate::Device::Cpu => {}

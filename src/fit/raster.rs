@@ -4,7 +4,8 @@
 //! projection ([`crate::render::project`]) and tile lists as the decoder. In `alpha`
 //! blending the forward pass gives the decoder's pixels bit for bit; `sum` blending, the
 //! default, goes through [`super::lanes`], eight pixels at a time with a polynomial
-//! `exp`, within 1e-5 of the decoder's pixels (test `forward_matches_the_decoder`).
+//! `exp`, within 1e-5 (relative to 1 + the value) of the decoder's pixels (test
+//! `forward_matches_the_decoder`).
 //! The file an encode writes is measured with the decoder itself.
 //!
 //! The backward pass returns, for each projected Gaussian, the gradient with respect to
@@ -42,6 +43,14 @@ impl ProjGrad {
             opacity: g[5],
             color: [g[6], g[7], g[8]],
         }
+    }
+
+    /// The flat layout of [`ProjGrad::from_slot`].
+    pub fn to_slot(&self) -> [f32; 9] {
+        let [mx, my] = self.mean;
+        let [a, b, c] = self.conic;
+        let [r, g, bl] = self.color;
+        [mx, my, a, b, c, self.opacity, r, g, bl]
     }
 
     fn add(&mut self, o: &ProjGrad) {
