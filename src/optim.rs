@@ -22,7 +22,7 @@ pub struct Adam {
 }
 
 /// Learning rates per attribute component (normalized units for positions).
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LearningRates {
     pub position: f32,
     pub log_scale: f32,

@@ -7,6 +7,8 @@
 //!
 //! Each image is encoded at 1 bpp on the CPU, one after another; a line per image, then the
 //! mean PSNR and median time. `COARSE_SHARE` 0 (or `FACTOR` 1) fits at full resolution only.
+//! `GSI_PROBE_LR=F` multiplies every learning rate by `F` (how the rates of the levels
+//! were checked, BENCHMARKS.md, session 10).
 
 use gsi::fit::{encode, Budget, Coarse, EncodeOptions, Target};
 use std::time::Instant;
@@ -23,7 +25,12 @@ fn main() {
             .unwrap_or_else(|_| panic!("{} is not a number", args[k]))
     };
     let (fraction, factor) = (number(1), number(2) as u32);
+    let lr_scale: f32 = std::env::var("GSI_PROBE_LR").map_or(1.0, |v| {
+        v.parse()
+            .unwrap_or_else(|_| panic!("GSI_PROBE_LR={v} is not a number"))
+    });
     let opts = EncodeOptions {
+        lr: EncodeOptions::default().lr.scaled(lr_scale),
         budget: Budget::Bpp(1.0),
         iterations: number(0) as u32,
         coarse: (fraction > 0.0 && factor > 1).then_some(Coarse { factor, fraction }),

@@ -2,7 +2,7 @@
 //!
 //! Each level is a measured choice of the steps, how many of them fit a reduced copy of the
 //! image first ([`Coarse`]) and how long the colour solves run, chosen on LOL eval15's
-//! normal-light images and reported on Kodak (BENCHMARKS.md, session 8).
+//! normal-light images and reported on Kodak (BENCHMARKS.md, sessions 8 and 10).
 //! `--iterations` stays an expert override of the level's steps.
 
 use super::{Coarse, EncodeOptions};
@@ -12,16 +12,18 @@ use super::{Coarse, EncodeOptions};
 pub struct Effort(u8);
 
 /// Steps, coarse steps' share (at half resolution; 0 for none) and colour-solve
-/// iterations of each level. Chosen on 4 of LOL eval15's normal-light images at 1 bpp
+/// iterations of each level. Chosen on LOL eval15's normal-light images at 1 bpp
 /// (BENCHMARKS.md, session 8): a half-resolution start wins at equal time up to about
-/// 13 s there (60 steps: +0.8 dB over 40 full ones in less time; 200: +0.4 dB), and loses
-/// beyond (800 steps half coarse: 31.81 dB in 25.5 s, 400 full ones: 31.90 dB in 20.0 s),
-/// so the upper levels add full-resolution steps. Level 5 is the fit before levels, and
-/// the default: no level reached more PSNR in its time.
+/// 13 s there and loses beyond, so the upper levels add full-resolution steps. With the
+/// rates of session 10 ([`super::LEARNING_RATES`]) the fastest level is the one that
+/// keeps within 1 dB of the fit before levels (400 steps at the old rates) on 8 of those
+/// images: 160 steps are 0.70 dB under it, 120 steps 1.30 dB (session 10). Level 5, 400
+/// full-resolution steps, stays the default: the level above it would not fit a 12 MP
+/// photograph in 5 minutes.
 const LEVELS: [(u32, f32, u32); 9] = [
-    (60, 0.5, 4),
-    (100, 0.5, 6),
+    (160, 0.5, 8),
     (200, 0.5, 10),
+    (300, 0.5, 10),
     (400, 0.5, 10),
     (400, 0.0, 10),
     (600, 0.0, 10),

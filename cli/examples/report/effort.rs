@@ -4,7 +4,7 @@
 //! the `report:effort` section of BENCHMARKS.md.
 
 use super::{commit, images, load, machine, mean, median, replace_section};
-use gsi::fit::{encode, Budget, Effort, EncodeOptions};
+use gsi::fit::{encode, Budget, Effort, EncodeOptions, LearningRates};
 use plotters::prelude::*;
 use serde_json::json;
 use std::path::Path;
@@ -34,12 +34,13 @@ fn configs(levels: &[u8], before: bool) -> Vec<Config> {
         ..EncodeOptions::default()
     };
     let reference = Config {
-        label: "before: 400 steps, full resolution".into(),
+        label: "before: 400 steps, full resolution, GaussianImage's rates".into(),
         level: None,
         opts: EncodeOptions {
             iterations: 400,
             coarse: None,
             color_solve: 10,
+            lr: BEFORE_RATES,
             ..base.clone()
         },
     };
@@ -67,7 +68,7 @@ fn configs(levels: &[u8], before: bool) -> Vec<Config> {
 pub fn section(kodak: &Path, out_dir: &Path, limit: usize, levels: &[u8], keep: bool) {
     let stamp = (machine(), commit());
     let files = images(kodak, limit);
-    // Kept levels bring their own reference (level 5 is the fit before levels).
+    // Kept levels bring the reference of the run that timed them.
     let configs = configs(levels, !keep);
     let mut results: Vec<Vec<Row>> = configs.iter().map(|_| Vec::new()).collect();
     // Image by image, every configuration in turn: the machine's drift in load falls on
@@ -174,10 +175,24 @@ fn earlier(path: &Path, images: &[String]) -> Vec<(u8, String, Vec<Row>)> {
     out
 }
 
-/// Whether `c` is the fit before effort levels: 400 full-resolution steps.
+/// Whether `c` is the fit before effort levels: 400 full-resolution steps at
+/// GaussianImage's rates.
 fn is_before(c: &Config) -> bool {
-    c.opts.iterations == 400 && c.opts.coarse.is_none() && c.opts.color_solve == 10
+    c.opts.iterations == 400
+        && c.opts.coarse.is_none()
+        && c.opts.color_solve == 10
+        && c.opts.lr == BEFORE_RATES
 }
+
+/// The learning rates of the fit before effort levels (GaussianImage's), which the
+/// levels' rates replaced in session 10.
+const BEFORE_RATES: LearningRates = LearningRates {
+    position: 2e-4,
+    log_scale: 0.01,
+    rotation: 0.01,
+    color: 0.005,
+    opacity: 0.01,
+};
 
 fn markdown(
     configs: &[Config],
