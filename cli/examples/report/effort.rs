@@ -1,6 +1,6 @@
 //! Time against PSNR for each `--effort` level (issue 13): the Kodak images at 1 bpp,
 //! encoded one after another on the CPU, each level and the fit before effort levels
-//! (400 full-resolution steps) in the same run. Writes `effort.json` and `effort.svg`, and
+//! (400 full-resolution steps at the old rates) in the same run. Writes `effort.json` and `effort.svg`, and
 //! the `report:effort` section of BENCHMARKS.md.
 
 use super::{commit, images, load, machine, mean, median, replace_section};
@@ -209,7 +209,7 @@ fn markdown(
          Machine: {}. Commit: `{}`. The {} Kodak images at 1 bpp, on the CPU (`--device cpu`),\n\
          one encode at a time; for each image every configuration of a run in turn. PSNR of the stored\n\
          file; Δ is the mean of each image's difference to the fit before effort levels\n\
-         (400 full-resolution steps).\n\
+         (400 full-resolution steps at GaussianImage's learning rates, the default before session 10).\n\
          Regenerate: `cargo run --release --example report -- --effort-only`.\n\n\
          | configuration | steps (coarse share) | colour solve | median time | mean PSNR | Δ PSNR | median N |\n\
          |---|---|---|---|---|---|---|\n",
