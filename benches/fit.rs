@@ -51,6 +51,12 @@ fn fit_iteration(c: &mut Criterion) {
         group.bench_function(format!("{}/backward/5k", blend.name()), |b| {
             b.iter(|| black_box(raster::backward(&fwd, &proj, &d, raster::Need::All)))
         });
+        // What a step of the default fit runs: both passes and the loss, tile by tile.
+        if blend == Blend::Sum {
+            group.bench_function("sum/step_l2/5k", |b| {
+                b.iter(|| black_box(raster::step_l2_sum(&proj, &t.data, 768, 512)))
+            });
+        }
     }
     group.finish();
 }
