@@ -297,3 +297,20 @@ fn default_options_are_the_default_effort() {
         .all(|w| w[0].0 <= w[1].0 && w[0].1 >= w[1].1));
     assert_eq!((Effort::new(0), Effort::new(10)), (None, None));
 }
+
+/// Position rates mean pixels a step: scaled down on images longer than `RATE_SIDE`, kept
+/// on smaller ones; the other rates are the same at every size.
+#[test]
+fn position_rates_follow_the_image_size() {
+    use super::{rates_for, LEARNING_RATES, RATE_SIDE};
+    let lr = LEARNING_RATES;
+    assert_eq!(rates_for(&lr, 768, 512), lr);
+    assert_eq!(rates_for(&lr, 16, 600), lr);
+    let big = rates_for(&lr, 3000, 4000);
+    let pixels = |r: &super::LearningRates, side: u32| r.position * side as f32;
+    assert!((pixels(&big, 4000) - pixels(&lr, RATE_SIDE)).abs() < 1e-6);
+    assert_eq!(
+        (big.log_scale, big.rotation, big.color),
+        (lr.log_scale, lr.rotation, lr.color)
+    );
+}
