@@ -96,7 +96,7 @@ pub struct Coarse {
 }
 
 /// The learning rates of every level: six times GaussianImage's (2e-4, 0.01, 0.01,
-/// 0.005, 0.01), which are set for tens of thousands of steps; a level takes 60 to 1600.
+/// 0.005, 0.01), which are set for tens of thousands of steps; a level takes 160 to 1600.
 /// One factor for all, checked on 8 of LOL eval15's normal-light images at 1 bpp (not
 /// Kodak, which the report scores): ×2 to ×8 all beat ×1 at 60, 200, 400 and 800 steps,
 /// ×6 by +0.47, +0.93, +0.37 and +0.14 dB; ×12 falls back (BENCHMARKS.md, session 10).
@@ -112,9 +112,10 @@ pub const LEARNING_RATES: LearningRates = LearningRates {
 /// on a longer side it shrinks in proportion ([`rates_for`]), so that a step moves a
 /// Gaussian about as many pixels (0.9 at the start of a fit) on a 12 MP photograph as on
 /// a Kodak image, where in normalized units as such it moved 4.8 pixels a step on a
-/// 4000-pixel side. At 12 MP this changed little (effort 5: 45.40 → 45.45 dB, 274 →
-/// 241 s, one run each; BENCHMARKS.md, session 10). 768 is Kodak's side, so the Kodak
-/// figures stand; the rates were checked on 600-pixel images, which keep theirs too.
+/// 4000-pixel side. Kept on that principle: on the scale table's smooth renders, where
+/// quantization decides the stored PSNR, it moved effort 1 by +0.6 to +1.4 dB and
+/// effort 5 by −1.2 to +0.05 dB (BENCHMARKS.md, session 10). 768 is Kodak's side, so the
+/// Kodak figures stand; the rates were checked on 600-pixel images, which keep theirs.
 pub const RATE_SIDE: u32 = 768;
 
 /// `lr` for a `width × height` image: the position rate scaled by [`RATE_SIDE`] over the
