@@ -10,7 +10,7 @@
 //!
 //! On x86-64 the loops are compiled a second time, for AVX2 with fused multiply-adds
 //! ([`mla`]), picked at run time where the CPU has both (Intel since 2013, AMD since
-//! 2015); whole encodes run about 1.35× faster than with unfused AVX2. A fused
+//! 2015); a kodim05 encode ran 1.35× faster than with unfused AVX2. A fused
 //! multiply-add is one correctly rounded operation, so the portable loops with `F` give
 //! its bits on any CPU (the test checks it), and a fit is the same on every CPU that
 //! runs the same build; between the fused and the unfused build, files differ by
