@@ -28,6 +28,9 @@ struct Fit {
     bits_covariance: u32,
     bits_color: u32,
     bits_opacity: u32,
+    // The angle of a log-scale-rotation covariance (its range is a quarter turn); the
+    // host sets bits_covariance here for a Cholesky factor.
+    bits_angle: u32,
     lr_position: f32,
     lr_log_scale: f32,
     lr_rotation: f32,
@@ -42,6 +45,10 @@ struct Fit {
     // The parameters are a Cholesky factor (l11, l21, l22) rather than ln σ1, ln σ2, θ
     // (a decoded scene's choice; the fitter always moves log-scale-rotation).
     cholesky: u32,
+    // A uniform block is a whole number of 16-byte rows.
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
 }
 
 @group(0) @binding(0) var<uniform> fit: Fit;

@@ -18,8 +18,11 @@ fn bits_of(k: u32) -> u32 {
     if (k < 2u) {
         return fit.bits_position;
     }
-    if (k < 5u) {
+    if (k < 4u) {
         return fit.bits_covariance;
+    }
+    if (k == 4u) {
+        return fit.bits_angle;
     }
     if (k < 8u) {
         return fit.bits_color;

@@ -197,6 +197,7 @@ mod corpus {
         let low = BitDepths {
             position: 10,
             covariance: 6,
+            angle: 6,
             color: 5,
             opacity: 4,
         };
@@ -244,6 +245,7 @@ mod corpus {
         let wide = BitDepths {
             position: 24,
             covariance: 24,
+            angle: 24,
             color: 12,
             opacity: 9,
         };
@@ -364,6 +366,7 @@ mod corpus {
             BitDepths {
                 position: 24,
                 covariance: 24,
+                angle: 24,
                 color: 8,
                 opacity: 8,
             },

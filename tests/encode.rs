@@ -252,6 +252,20 @@ fn sum_files_are_written_along_the_curve_with_method_2() {
         "method 2: {coded} bytes, 1.0 codings {packed}"
     );
     assert!(e.float_psnr.is_finite() && e.psnr.is_finite());
+    // Angles are stored within a quarter turn, one bit under the scales.
+    let angle = f.records.covariance.quantizers[2];
+    let eighth = std::f32::consts::FRAC_PI_4;
+    assert!(
+        angle.min >= -eighth && angle.max <= eighth,
+        "angles over [{}, {}]",
+        angle.min,
+        angle.max
+    );
+    assert_eq!(
+        angle.bits + 1,
+        f.records.covariance.quantizers[0].bits,
+        "angle bits"
+    );
 }
 
 #[test]

@@ -44,9 +44,10 @@ pub struct Args {
     /// Expert override of the effort level's optimizer steps (coarse ones included).
     #[arg(long)]
     iterations: Option<u32>,
-    /// Expert override of the bit depths, `POSITION,COVARIANCE,COLOUR,OPACITY` (each
-    /// 1..=24); by default they are chosen from the image size.
-    #[arg(long, value_name = "P,C,K,O")]
+    /// Expert override of the bit depths, `POSITION,COVARIANCE,COLOUR,OPACITY[,ANGLE]`
+    /// (each 1..=24; the angle defaults to one bit under the covariance's scales); by
+    /// default they are chosen from the image size.
+    #[arg(long, value_name = "P,C,K,O[,A]")]
     bits: Option<String>,
     /// Initialization: content-adaptive, or the paper's random cold start.
     #[arg(long, value_enum, default_value_t = InitArg::Adaptive)]
@@ -157,11 +158,12 @@ fn options(args: &Args) -> Result<EncodeOptions, Failure> {
     })
 }
 
-/// `--bits P,C,K,O`: four depths, each 1..=24.
+/// `--bits P,C,K,O[,A]`: four or five depths, each 1..=24. Without `A`, the angle takes
+/// one bit fewer than the covariance's scales, as the default depths do.
 fn parse_bits(s: &str) -> Result<BitDepths, Failure> {
     let bad = || {
         Failure(format!(
-            "--bits {s}: expected four depths 1..=24, as 13,8,8,6"
+            "--bits {s}: expected four or five depths 1..=24, as 12,8,8,6 or 12,8,8,6,7"
         ))
     };
     let d: Vec<u8> = s
@@ -169,15 +171,18 @@ fn parse_bits(s: &str) -> Result<BitDepths, Failure> {
         .map(|x| x.trim().parse::<u8>().ok().filter(|b| (1..=24).contains(b)))
         .collect::<Option<_>>()
         .ok_or_else(bad)?;
-    match d[..] {
-        [position, covariance, color, opacity] => Ok(BitDepths {
-            position,
-            covariance,
-            color,
-            opacity,
-        }),
-        _ => Err(bad()),
-    }
+    let (position, covariance, color, opacity, angle) = match d[..] {
+        [p, c, k, o] => (p, c, k, o, c.saturating_sub(1).max(1)),
+        [p, c, k, o, a] => (p, c, k, o, a),
+        _ => return Err(bad()),
+    };
+    Ok(BitDepths {
+        position,
+        covariance,
+        angle,
+        color,
+        opacity,
+    })
 }
 
 /// Encode `target`, read from `input`, into `output`; the summary line.

@@ -12,6 +12,7 @@ use std::process::{Command, Output, Stdio};
 const BITS: BitDepths = BitDepths {
     position: 12,
     covariance: 8,
+    angle: 8,
     color: 8,
     opacity: 6,
 };

@@ -523,6 +523,7 @@ fn cli_enhance_on_the_gpu() {
     let bits = BitDepths {
         position: 12,
         covariance: 10,
+        angle: 10,
         color: 10,
         opacity: 8,
     };

@@ -28,24 +28,28 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     const DEFAULT: BitDepths = BitDepths {
         position: 16,
         covariance: 12,
+        angle: 12,
         color: 8,
         opacity: 8,
     };
     const ODD: BitDepths = BitDepths {
         position: 3,
         covariance: 5,
+        angle: 5,
         color: 7,
         opacity: 1,
     };
     const WIDE: BitDepths = BitDepths {
         position: 24,
         covariance: 24,
+        angle: 24,
         color: 24,
         opacity: 24,
     };
     const NONE: BitDepths = BitDepths {
         position: 0,
         covariance: 0,
+        angle: 0,
         color: 0,
         opacity: 0,
     };

@@ -82,6 +82,7 @@ fuzz_target!(|input: Input| {
         BitDepths {
             position,
             covariance,
+            angle: covariance,
             color,
             opacity,
         },

@@ -184,13 +184,17 @@ pub struct Encoded {
 /// colour 8 bits. Chosen on LOL eval15's normal-light images (not Kodak, which the report
 /// scores) at 0.5 and 1 bpp: of position 12 or 13 bits and covariance and colour 6 to 9
 /// bits, these gave the highest PSNR at both rates (BENCHMARKS.md, session 6). Coarser
-/// codes buy more Gaussians but lose more than they buy.
+/// codes buy more Gaussians but lose more than they buy. The angle, kept within a quarter
+/// turn since session 11, takes 7 bits: twice the precision the 8 bits over a free angle's
+/// range had, in as many bits. Of 6, 7 and 8 bits on the same images at 1 bpp, 7 and 8
+/// were within 0.03 dB of each other and 6 lost 0.1 dB (BENCHMARKS.md, session 11).
 pub fn default_bits(width: u32, height: u32, blend: Blend) -> BitDepths {
     let side = width.max(height).max(2);
     let position = (32 - (side - 1).leading_zeros() + 2).clamp(6, 20) as u8;
     BitDepths {
         position,
         covariance: 8,
+        angle: 7,
         color: if blend == Blend::Sum { 8 } else { 7 },
         opacity: 6,
     }
@@ -244,6 +248,16 @@ fn measured(r: resident::StepReport, base: u64) -> Measured {
 
 /// Fixed bytes of a file: signature, header, gCRM, chunk frames and quantizer preambles.
 const FILE_OVERHEAD: f32 = 300.0;
+
+/// Most Gaussians a fit of `px` pixels takes: one per two pixels, and at most 2^22.
+fn max_gaussians(px: f32) -> usize {
+    ((px / 2.0) as usize).clamp(1, 1 << 22)
+}
+
+/// How many Gaussians of `per_g` bytes each fit a budget of `bpp` over `px` pixels.
+fn fitting_count(bpp: f32, px: f32, per_g: f32) -> usize {
+    (((bpp * px / 8.0 - FILE_OVERHEAD) / per_g) as usize).clamp(1, max_gaussians(px))
+}
 
 /// What a fitting step measured ([`Fitter::step`] with `measure`).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -363,6 +377,25 @@ impl<'a> Fitter<'a> {
             q.opacity = Some(vec![1.0; q.len()]);
         }
         q
+    }
+
+    /// Put every Gaussian's angle in `[−π/4, π/4]` ([`params::canonical_rotation`]),
+    /// swapping its scales (and their optimizer moments) where that takes a quarter turn.
+    /// The covariances stay the same, so the render moves only by rounding; the stored
+    /// angles then span a quarter turn.
+    pub fn canonicalize_rotations(&mut self) {
+        self.sync();
+        for i in 0..self.params.len() {
+            let (p, swapped) = params::canonical_rotation(self.params.cov[i]);
+            self.params.cov[i] = p;
+            if swapped {
+                for s in [&mut self.adam.m, &mut self.adam.v] {
+                    if let Some(c) = s.cov.get_mut(i) {
+                        c.swap(0, 1);
+                    }
+                }
+            }
+        }
     }
 
     /// Replace the colours by their least-squares optimum for the current geometry.
@@ -720,6 +753,11 @@ struct Runner<'o, 'p> {
     /// `opts.lr` for the image's size ([`rates_for`]).
     lr: LearningRates,
     bits: BitDepths,
+    /// The byte budget (bits per pixel) that the densification steps fill, once the
+    /// Gaussians' own cost can be measured; `None` where there is none to fill.
+    fill: Option<f32>,
+    /// The full-resolution image's size.
+    size: (u32, u32),
     stop_at: Option<f64>,
     start: std::time::Instant,
     on_progress: &'p mut dyn FnMut(&Progress),
@@ -741,10 +779,14 @@ impl Runner<'_, '_> {
         for it in 0..total {
             if opts.densify && densify_at.contains(&it) && it > 0 {
                 let n_now = fitter.params.len();
-                fitter.prune_and_grow(0.5, n_now, n_now);
+                let n = self.filling(fitter).unwrap_or(n_now);
+                fitter.prune_and_grow(0.5, n, n);
                 if opts.blend == Blend::Sum || opts.init == Init::Adaptive {
                     fitter.solve_colors(opts.color_solve as usize);
                 }
+            }
+            if it == qat_from {
+                fitter.canonicalize_rotations();
             }
             let qat = (it >= qat_from).then_some(self.bits);
             let measure = it % 10 == 0 || it + 1 == total;
@@ -756,6 +798,28 @@ impl Runner<'_, '_> {
         while let Some(m) = fitter.flush() {
             self.measured(m, base, fitter, phase, qat_from);
         }
+    }
+
+    /// How many Gaussians fill the byte budget at what the current ones cost coded, in
+    /// the form they will be stored in; `None` without a budget to fill or at a reduced
+    /// resolution.
+    ///
+    /// The count chosen before the fit prices the initial Gaussians, which code a few per
+    /// cent dearer than fitted ones, so files came out 6 % under a 1 bpp budget (Kodak,
+    /// session 11). Measured again at each densification, the count follows the cost.
+    fn filling(&self, fitter: &Fitter) -> Option<usize> {
+        let b = self.fill?;
+        let t = fitter.target;
+        let (w, h) = self.size;
+        if (t.width, t.height) != (w, h) {
+            return None;
+        }
+        let mut scene = fitter.scene();
+        for c in &mut scene.gaussians.cov {
+            *c = params::canonical_rotation(*c).0;
+        }
+        let per_g = coded_bytes_per_gaussian(&scene, self.bits) * 1.01;
+        Some(fitting_count(b, w as f32 * h as f32, per_g))
     }
 
     /// Report a measurement; whether the PSNR target is reached (by a quantization-aware
@@ -862,16 +926,21 @@ pub fn encode(
     let px = (w as f32) * (h as f32);
     let bits = opts.bits.unwrap_or_else(|| default_bits(w, h, opts.blend));
     let per_g = bytes_per_gaussian(bits, opts.blend);
-    let max_n = ((px / 2.0) as usize).clamp(1, 1 << 22);
+    let max_n = max_gaussians(px);
     let mut n = match opts.budget {
         Budget::Gaussians(n) => n.clamp(1, 1 << 22),
-        Budget::Bpp(b) => (((b * px / 8.0 - FILE_OVERHEAD) / per_g) as usize).clamp(1, max_n),
+        Budget::Bpp(b) => fitting_count(b, px, per_g),
         Budget::TargetPsnr(_) => ((px / 400.0) as usize).clamp(4.min(max_n), max_n),
     };
     let mut runner = Runner {
         opts,
         lr: rates_for(&opts.lr, w, h),
         bits,
+        fill: match opts.budget {
+            Budget::Bpp(b) => Some(b),
+            _ => None,
+        },
+        size: (w, h),
         stop_at: match opts.budget {
             Budget::TargetPsnr(p) => Some(f64::from(p)),
             _ => None,
@@ -896,7 +965,7 @@ pub fn encode(
             ..fitter.scene()
         };
         let per_g = coded_bytes_per_gaussian(&scene, bits) * 1.02;
-        let fits = (((b * px / 8.0 - FILE_OVERHEAD) / per_g) as usize).clamp(1, max_n);
+        let fits = fitting_count(b, px, per_g);
         if fits.abs_diff(n) * 50 > n {
             n = fits;
             fitter = new_fitter(n);
@@ -945,6 +1014,8 @@ pub fn encode(
         }
     };
     let fine_steps = opts.iterations - coarse.as_ref().map_or(0, |c| c.1);
+    // The passes below shrink to the budget; refilling it there would undo them.
+    runner.fill = None;
     let mut result = finish(&mut fitter, bits, opts)?;
     // Budgets: shrink to the byte budget, or grow to the quality target.
     for _ in 0..4 {
@@ -995,7 +1066,7 @@ pub fn encode(
 
 /// Quantize, drop what the 8-bit render cannot show, write, and measure the stored PSNR.
 fn finish(fitter: &mut Fitter, bits: BitDepths, opts: &EncodeOptions) -> Result<Encoded, Error> {
-    fitter.sync();
+    fitter.canonicalize_rotations();
     let t = fitter.target;
     let mut scene = fitter.scene();
     // A Gaussian whose whole contribution is under one 8-bit step changes nothing visible.
@@ -1014,7 +1085,7 @@ fn finish(fitter: &mut Fitter, bits: BitDepths, opts: &EncodeOptions) -> Result<
     let float = crate::render::render(&scene, t.width, t.height)?;
     let float_psnr = loss::psnr8(&float.data, &t.data, t.width, t.height);
     let mut settings = format!(
-        "encoder=gsi {}\ninit={:?}\niterations={}\nseed={}\nbudget={:?}\nloss={:?}\nbits={}/{}/{}/{}",
+        "encoder=gsi {}\ninit={:?}\niterations={}\nseed={}\nbudget={:?}\nloss={:?}\nbits={}/{}/{}/{}/{}",
         env!("CARGO_PKG_VERSION"),
         opts.init,
         opts.iterations,
@@ -1024,7 +1095,8 @@ fn finish(fitter: &mut Fitter, bits: BitDepths, opts: &EncodeOptions) -> Result<
         bits.position,
         bits.covariance,
         bits.color,
-        bits.opacity
+        bits.opacity,
+        bits.angle
     );
     // Written only where used, so that files of the settings before them stay the same.
     if let Some(c) = opts.coarse {

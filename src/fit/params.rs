@@ -70,3 +70,27 @@ pub fn chain(
         grads.cov[i][2] += (v2 - v1) * s2 * d_suu + (v1 - v2) * c2 * d_suv + (v1 - v2) * s2 * d_svv;
     }
 }
+
+/// The `log-scale-rotation` parameters `p` rewritten with the angle in `[−π/4, π/4]`,
+/// and whether the two scales were swapped to get there.
+///
+/// `(s1, s2, θ)`, `(s1, s2, θ + π)` and `(s2, s1, θ + π/2)` are one covariance, so every
+/// Gaussian has a form whose angle lies in a quarter turn. A file whose angles lie in
+/// `[−π/4, π/4]` quantizes them over a quarter of the range a free angle spreads over
+/// (2π or more after a fit), so the same precision costs two bits fewer. The interval is
+/// centred on 0 because fitted angles crowd about the axes: an interval with an end at an
+/// axis would split that crowd over both ends. Non-finite angles are left alone.
+pub fn canonical_rotation(p: [f32; 3]) -> ([f32; 3], bool) {
+    let quarter = std::f32::consts::FRAC_PI_2;
+    let turns = (p[2] / quarter).round();
+    if !turns.is_finite() || turns == 0.0 {
+        return (p, false);
+    }
+    let theta = (f64::from(p[2]) - f64::from(turns) * std::f64::consts::FRAC_PI_2) as f32;
+    let theta = theta.clamp(-quarter / 2.0, quarter / 2.0);
+    if turns.rem_euclid(2.0) == 1.0 {
+        ([p[1], p[0], theta], true)
+    } else {
+        ([p[0], p[1], theta], false)
+    }
+}

@@ -208,7 +208,12 @@ impl<'g> ResidentFit<'g> {
             u.lr = [lr.position, lr.log_scale, lr.rotation, lr.color, lr.opacity];
             u.qat = u32::from(qat.is_some());
             if let Some(b) = qat {
-                u.bits = [b.position, b.covariance, b.color, b.opacity]
+                let angle = if u.cholesky != 0 {
+                    b.covariance
+                } else {
+                    b.angle
+                };
+                u.bits = [b.position, b.covariance, b.color, b.opacity, angle]
                     .map(|b| u32::from(b.min(MAX_BITS)));
             }
             gpu.queue

@@ -8,6 +8,43 @@ use crate::optim::zeros_like as zero_grads;
 use crate::render::{project_scene, render};
 use crate::synth::{random_scene, SceneSpec, SplitMix64};
 
+/// Every angle lands within a quarter turn of 0 and the covariance stays what it was
+/// (to rounding), with the scales swapped exactly when an odd number of quarter turns
+/// was taken off.
+#[test]
+fn canonical_rotations_keep_the_covariance() {
+    let mut rng = SplitMix64::new(5);
+    let eighth = std::f32::consts::FRAC_PI_4;
+    for i in 0..2000 {
+        let p = [
+            -6.0 + 4.0 * rng.unit(),
+            -6.0 + 4.0 * rng.unit(),
+            // Up to ±20 rad, and the quarter turns themselves.
+            if i < 16 {
+                (i as f32 - 8.0) * 2.0 * eighth
+            } else {
+                40.0 * (rng.unit() - 0.5)
+            },
+        ];
+        let (q, swapped) = super::params::canonical_rotation(p);
+        assert!((-eighth..=eighth).contains(&q[2]), "{p:?} -> {q:?}");
+        assert_eq!(swapped, q[0] != p[0] && p[0] != p[1], "{p:?} -> {q:?}");
+        let (a, b) = (
+            CovParam::LogScaleRotation.covariance(p),
+            CovParam::LogScaleRotation.covariance(q),
+        );
+        let scale = a[0].max(a[2]);
+        for k in 0..3 {
+            assert!(
+                (a[k] - b[k]).abs() <= 2e-5 * scale,
+                "{p:?} -> {q:?}: {a:?} vs {b:?}"
+            );
+        }
+    }
+    let nan = [0.0, 1.0, f32::NAN];
+    assert!(!super::params::canonical_rotation(nan).1);
+}
+
 /// `alpha` blending renders with the decoder's own loops; `sum` with the lanes of
 /// `super::lanes`, whose `exp` differs from the platform's by under 2e-7 relative.
 #[test]

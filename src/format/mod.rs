@@ -60,6 +60,7 @@ pub mod tests_support {
         let bits = BitDepths {
             position: 8,
             covariance: 8,
+            angle: 8,
             color: 8,
             opacity: 8,
         };

@@ -6,7 +6,7 @@ use super::error::{invalid, Error, ErrorKind, Result};
 use super::header::Header;
 use super::limits::{AllocBudget, Limits};
 use super::quant::{self, Quantizer};
-use crate::model::{GaussianSet, Scene};
+use crate::model::{CovParam, GaussianSet, Scene};
 use byteorder::{BigEndian, ByteOrder};
 
 /// Payload compression method of an attribute chunk.
@@ -252,7 +252,14 @@ pub struct Records {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct BitDepths {
     pub position: u8,
+    /// The covariance's components; under `log-scale-rotation`, its two log-scales.
     pub covariance: u8,
+    /// The angle of a `log-scale-rotation` covariance (its third component). Apart
+    /// because its range is the encoder's choice: the stage-1 encoder keeps every angle
+    /// within a quarter turn ([`crate::fit::params::canonical_rotation`]), where one bit
+    /// fewer than the scales already halves the step a free angle had. A `cholesky`
+    /// covariance spends `covariance` on all three components.
+    pub angle: u8,
     pub color: u8,
     pub opacity: u8,
 }
@@ -262,6 +269,7 @@ impl Default for BitDepths {
         BitDepths {
             position: 16,
             covariance: 12,
+            angle: 12,
             color: 8,
             opacity: 8,
         }
@@ -291,7 +299,17 @@ impl Records {
                 scene.cov_param,
             ),
             positions: Attribute::fit(&g.positions, [bits.position; 2]),
-            covariance: Attribute::fit(&g.cov, [bits.covariance; 3]),
+            covariance: Attribute::fit(
+                &g.cov,
+                [
+                    bits.covariance,
+                    bits.covariance,
+                    match scene.cov_param {
+                        CovParam::LogScaleRotation => bits.angle,
+                        CovParam::Cholesky => bits.covariance,
+                    },
+                ],
+            ),
             colors: Attribute::fit(&g.colors, [bits.color; 3]),
             opacity,
         }

@@ -94,7 +94,8 @@ pub(crate) struct FitUniform {
     pub blend: u32,
     pub has_opacity: u32,
     pub qat: u32,
-    pub bits: [u32; 4],
+    /// Position, covariance, colour, opacity, angle (as `fit_common.wgsl` orders them).
+    pub bits: [u32; 5],
     pub lr: [f32; 5],
     pub c1: f32,
     pub c2: f32,
@@ -102,11 +103,12 @@ pub(crate) struct FitUniform {
     pub beta2: f32,
     pub eps: f32,
     pub cholesky: u32,
+    pub pad: [u32; 3],
 }
 
 // The size of `Fit` in `fit_common.wgsl`, checked at compile time here and against the WGSL
 // itself by `gpu::tests::uniform_structs_match_their_wgsl_layouts`.
-const _: () = assert!(std::mem::size_of::<FitUniform>() == 96);
+const _: () = assert!(std::mem::size_of::<FitUniform>() == 112);
 
 impl FitUniform {
     /// `count` Gaussians drawn at `width × height`; no step taken yet.
@@ -127,7 +129,7 @@ impl FitUniform {
             blend: u32::from(blend == Blend::Alpha),
             has_opacity: u32::from(has_opacity),
             qat: 0,
-            bits: [0; 4],
+            bits: [0; 5],
             lr: [0.0; 5],
             c1: 1.0,
             c2: 1.0,
@@ -135,6 +137,7 @@ impl FitUniform {
             beta2: 0.0,
             eps: 0.0,
             cholesky: 0,
+            pad: [0; 3],
         }
     }
 }

@@ -1128,7 +1128,8 @@ pub(crate) mod tests {
                 beta1,
                 beta2,
                 eps,
-                cholesky
+                cholesky,
+                pad = "pad0"
             ]
         );
         // The backward passes and the sort take four `u32` as an array.
