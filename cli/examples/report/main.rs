@@ -4,6 +4,7 @@
 //! cargo run --release --example report -- [--kodak DIR] [--lol DIR] [--bpp 0.5,1.0]
 //!     [--iterations T] [--limit N] [--curve-image FILE] [--curve-iterations T] [--out DIR]
 //!     [--quick | --enhance-only | --effort-only] [--efforts 1,3,5,7,9] [--effort-keep]
+//!     [--no-kodak] [--no-lol] [--no-curve] [--no-effort]
 //! ```
 //!
 //! For every image and bpp target it encodes, decodes and scores the file, and makes a
@@ -91,6 +92,7 @@ fn parse_args() -> Args {
             "--enhance-only" => a.enhance_only = true,
             "--effort-only" => a.effort_only = true,
             "--effort-keep" => a.effort_keep = true,
+            "--no-effort" => a.efforts.clear(),
             "--efforts" => {
                 a.efforts = value()
                     .split(',')
@@ -332,7 +334,7 @@ fn main() {
     if let Some(lol) = &lol_root {
         enhance::section(lol, args.kodak.as_deref(), &args.out, args.limit);
     }
-    if let Some(kodak) = &args.kodak {
+    if let Some(kodak) = args.kodak.as_ref().filter(|_| !args.efforts.is_empty()) {
         effort::section(
             kodak,
             &args.out,
