@@ -3,7 +3,7 @@
 //! same iteration resident on the GPU (`gpu_fit_iteration`).
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use gsi::fit::{raster, Fitter, Init, Loss, Target};
+use gsi::fit::{lsq, raster, Fitter, Init, Loss, Target};
 use gsi::model::Blend;
 use gsi::render::project_scene;
 use gsi::synth::{random_scene, SceneSpec};
@@ -51,10 +51,17 @@ fn fit_iteration(c: &mut Criterion) {
         group.bench_function(format!("{}/backward/5k", blend.name()), |b| {
             b.iter(|| black_box(raster::backward(&fwd, &proj, &d, raster::Need::All)))
         });
+        // The colour solve after pruning and re-placement (effort 1's 8 iterations).
+        group.bench_function(format!("{}/color_solve_8/5k", blend.name()), |b| {
+            b.iter(|| {
+                let mut p = proj.clone();
+                black_box(lsq::solve_colors(&mut p, blend, 768, 512, &t.data, 8))
+            })
+        });
         // What a step of the default fit runs: both passes and the loss, tile by tile.
         if blend == Blend::Sum {
             group.bench_function("sum/step_l2/5k", |b| {
-                b.iter(|| black_box(raster::step_l2_sum(&proj, &t.data, 768, 512)))
+                b.iter(|| black_box(raster::step_l2_sum(&proj, &t.data, 768, 512, true)))
             });
         }
     }

@@ -8,7 +8,8 @@
 //! Each image is encoded at 1 bpp on the CPU, one after another; a line per image, then the
 //! mean PSNR and median time. `COARSE_SHARE` 0 (or `FACTOR` 1) fits at full resolution only.
 //! `GSI_PROBE_LR=F` multiplies every learning rate by `F` (how the rates of the levels
-//! were checked, BENCHMARKS.md, session 10).
+//! were checked, BENCHMARKS.md, session 10). `GSI_PROBE_CURVE=1` prints every progress
+//! report (step, Gaussians, PSNR, seconds since the start), to see where a fit's time goes.
 
 use gsi::fit::{encode, Budget, Coarse, EncodeOptions, Target};
 use std::time::Instant;
@@ -37,6 +38,7 @@ fn main() {
         color_solve: number(3) as u32,
         ..EncodeOptions::default()
     };
+    let curve = std::env::var_os("GSI_PROBE_CURVE").is_some();
     let (mut psnr, mut seconds) = (Vec::new(), Vec::new());
     for path in &args[4..] {
         let img = image::open(path)
@@ -52,7 +54,15 @@ fn main() {
                 .collect(),
         };
         let t0 = Instant::now();
-        let e = encode(&target, &opts, gsi::Device::Cpu, &mut |_| {}).expect("encode");
+        let e = encode(&target, &opts, gsi::Device::Cpu, &mut |p| {
+            if curve {
+                println!(
+                    "  step {}/{}  N {}  {:.2} dB  {:.2} s",
+                    p.iteration, p.total, p.gaussians, p.psnr, p.seconds
+                );
+            }
+        })
+        .expect("encode");
         let s = t0.elapsed().as_secs_f64();
         println!(
             "{path}: N {}  {} bytes  {:.3} dB  {s:.2} s",

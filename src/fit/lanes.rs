@@ -38,11 +38,16 @@ type V = [f32; LANES];
 
 /// One tile in three planes (R, G, B), row-major, [`TILE`] pixels a row whatever the
 /// tile's real width.
+#[derive(Clone)]
 pub(super) struct Planes(pub [[f32; TILE_PIXELS]; 3]);
 
 impl Planes {
     pub fn zero() -> Planes {
         Planes([[0.0; TILE_PIXELS]; 3])
+    }
+
+    pub fn ones() -> Planes {
+        Planes([[1.0; TILE_PIXELS]; 3])
     }
 
     /// The tile `rect` of an interleaved RGB image `width` pixels wide.

@@ -7,9 +7,10 @@
 //! colour part of the backward pass applies `Aᵀ`, so conjugate gradients (on the normal
 //! equations) needs only renders.
 
+use super::lanes::Planes;
 use super::raster::{self, Need};
 use crate::model::Blend;
-use crate::render::Projected;
+use crate::render::{Projected, TileLists};
 
 /// Ridge term: keeps Gaussians that touch almost nothing from taking huge colours.
 const RIDGE: f32 = 1e-3;
@@ -26,25 +27,44 @@ pub fn solve_colors(
     iterations: usize,
 ) -> Vec<[f32; 3]> {
     let n = projected.len();
-    // A c: the forward pass with the colours `c` (its `image` is the product).
-    let apply = |proj: &mut [Projected], c: &[[f32; 3]]| -> raster::Forward {
+    let mut x: Vec<[f32; 3]> = projected.iter().map(|g| g.color).collect();
+    // `sum` blending: each product a tile at a time ([`raster::sum_adjoint`]), over one
+    // binning, since the geometry does not move. `alpha`: a forward pass, then the colour
+    // part of the backward pass on the binning it made.
+    let tiles = (blend == Blend::Sum).then(|| TileLists::bin(projected, width, height));
+    let set = |proj: &mut [Projected], c: &[[f32; 3]]| {
         for (g, c) in proj.iter_mut().zip(c) {
             g.color = *c;
         }
-        raster::forward(proj, blend, width, height)
     };
-    // Aᵀ r, reusing the binning of the forward pass that produced `f`.
-    let adjoint = |f: &raster::Forward, proj: &[Projected], r: &[f32]| -> Vec<[f32; 3]> {
-        raster::backward(f, proj, r, Need::ColorOnly)
-            .into_iter()
-            .map(|g| g.color)
-            .collect()
+    let colors = |grads: Vec<raster::ProjGrad>| grads.into_iter().map(|g| g.color).collect();
+    // Aᵀ d(A c), with `d` given the rendered pixels (interleaved RGB) and the target's.
+    let product = |proj: &mut [Projected], c: &[[f32; 3]], subtract: bool| -> Vec<[f32; 3]> {
+        set(proj, c);
+        match &tiles {
+            Some(tiles) => raster::sum_adjoint(proj, tiles, width, height, None, |acc, rect| {
+                if !subtract {
+                    return acc.clone();
+                }
+                let mut d = Planes::gather(target, width, rect);
+                for (dc, ac) in d.0.iter_mut().zip(&acc.0) {
+                    dc.iter_mut().zip(ac).for_each(|(y, a)| *y -= a);
+                }
+                d
+            }),
+            None => {
+                let f = raster::forward(proj, blend, width, height);
+                let d = if subtract {
+                    target.iter().zip(&f.image).map(|(y, a)| y - a).collect()
+                } else {
+                    f.image.clone()
+                };
+                colors(raster::backward(&f, proj, &d, Need::ColorOnly))
+            }
+        }
     };
-    let mut x: Vec<[f32; 3]> = projected.iter().map(|g| g.color).collect();
     // r = Aᵀ(y − A x) − ε x
-    let f = apply(projected, &x);
-    let resid: Vec<f32> = target.iter().zip(&f.image).map(|(y, a)| y - a).collect();
-    let mut r = adjoint(&f, projected, &resid);
+    let mut r = product(projected, &x, true);
     for (ri, xi) in r.iter_mut().zip(&x) {
         for ch in 0..3 {
             ri[ch] -= RIDGE * xi[ch];
@@ -66,8 +86,7 @@ pub fn solve_colors(
             break;
         }
         // q = (AᵀA + ε) p, per channel.
-        let f = apply(projected, &p);
-        let mut q = adjoint(&f, projected, &f.image);
+        let mut q = product(projected, &p, false);
         for (qi, pi) in q.iter_mut().zip(&p) {
             for ch in 0..3 {
                 qi[ch] += RIDGE * pi[ch];

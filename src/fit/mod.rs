@@ -81,14 +81,15 @@ pub struct EncodeOptions {
     /// Prune and re-place Gaussians during fitting.
     pub densify: bool,
     /// Conjugate-gradient iterations of each least-squares colour solve (after pruning
-    /// and re-placement, and after the coarse steps); the first solve takes twice as many.
+    /// and re-placement); the first solve takes twice as many.
     pub color_solve: u32,
 }
 
 /// Coarse-to-fine fitting: the first `fraction` of the iterations fit the image reduced
 /// `factor` times in each direction (each output pixel the mean of a `factor`² block).
 /// Positions and covariances are stored relative to the image, so the coarse fit is a
-/// start for the full one as it is; a coarse step costs about `1/factor²` of a full one.
+/// start for the full one as it is, optimizer state included; a coarse step costs about
+/// `1/factor²` of a full one.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Coarse {
     pub factor: u32,
@@ -133,8 +134,11 @@ impl Default for EncodeOptions {
     fn default() -> Self {
         EncodeOptions {
             budget: Budget::Bpp(1.0),
-            iterations: 400,
-            coarse: None,
+            iterations: 600,
+            coarse: Some(Coarse {
+                factor: 2,
+                fraction: 0.5,
+            }),
             init: Init::Adaptive,
             blend: Blend::Sum,
             seed: 0,
@@ -296,6 +300,8 @@ pub struct Fitter<'a> {
 }
 
 impl<'a> Fitter<'a> {
+    /// `n` Gaussians placed on `target` by `init` (with the adaptive start, their colours
+    /// solved), and a fresh optimizer.
     pub fn new(
         target: &'a Target,
         n: usize,
@@ -304,23 +310,10 @@ impl<'a> Fitter<'a> {
         loss: Loss,
         seed: u64,
     ) -> Fitter<'a> {
-        Fitter::started(target, n, init, blend, loss, seed, 20)
-    }
-
-    /// [`Fitter::new`] with `solve` iterations of the first colour solve.
-    fn started(
-        target: &'a Target,
-        n: usize,
-        init: Init,
-        blend: Blend,
-        loss: Loss,
-        seed: u64,
-        solve: usize,
-    ) -> Fitter<'a> {
         let params = init::initialize(target, n, init, blend, seed);
         let mut f = Fitter::with_params(target, params, blend, loss, seed);
         if init == Init::Adaptive {
-            f.solve_colors(solve);
+            f.solve_colors(20);
         }
         f
     }
@@ -608,7 +601,7 @@ impl<'a> Fitter<'a> {
             }
         }
         if self.blend == Blend::Sum && self.loss.kind() == Loss::L2 {
-            let step = raster::step_l2_sum(projected, &self.target.data, w, h);
+            let step = raster::step_l2_sum(projected, &self.target.data, w, h, measure);
             let psnr = measure.then(|| loss::psnr8(&step.image, &self.target.data, w, h));
             return (step.loss, psnr, step.grads);
         }
@@ -635,15 +628,25 @@ impl<'a> Fitter<'a> {
         let (w, h) = (self.target.width, self.target.height);
         let scene = self.scene();
         let projected = project_scene(&scene, w, h);
-        let fwd = raster::forward(&projected, self.blend, w, h);
-        let ones = vec![1f32; fwd.image.len()];
-        let pg = raster::backward(&fwd, &projected, &ones, Need::ColorOnly);
+        // Σ_p alpha_i T_i: the colour gradient of a render under a gradient of ones.
+        let (weights, image) = if self.blend == Blend::Sum {
+            let tiles = crate::render::TileLists::bin(&projected, w, h);
+            let mut image = vec![0f32; (w * h * 3) as usize];
+            let ones = |_: &lanes::Planes, _| lanes::Planes::ones();
+            let c = raster::sum_adjoint(&projected, &tiles, w, h, Some(&mut image), ones);
+            (c, image)
+        } else {
+            let fwd = raster::forward(&projected, self.blend, w, h);
+            let ones = vec![1f32; fwd.image.len()];
+            let pg = raster::backward(&fwd, &projected, &ones, Need::ColorOnly);
+            (pg.iter().map(|g| g.color).collect(), fwd.image)
+        };
         let mut score = vec![0f32; self.params.len()];
-        for (g, d) in projected.iter().zip(&pg) {
+        for (g, d) in projected.iter().zip(&weights) {
             let cmax = g.color.iter().fold(0f32, |m, c| m.max(c.abs()));
-            score[g.index] = d.color[0] * cmax.max(1.0 / 255.0);
+            score[g.index] = d[0] * cmax.max(1.0 / 255.0);
         }
-        (score, fwd.image)
+        (score, image)
     }
 
     /// Drop Gaussians whose total contribution is below `min_score`, keeping at most
@@ -951,25 +954,30 @@ pub fn encode(
     };
     let coarse = coarse_start(target, opts.coarse, n, opts.iterations);
     let first = coarse.as_ref().map_or(target, |(t, _)| t);
-    let solve = 2 * opts.color_solve as usize;
-    let new_fitter =
-        |n| Fitter::started(first, n, opts.init, opts.blend, opts.loss, opts.seed, solve);
-    let mut fitter = new_fitter(n);
+    let placed = |n| init::initialize(first, n, opts.init, opts.blend, opts.seed);
+    let mut params = placed(n);
     if let Budget::Bpp(b) = opts.budget {
         // Method 2's cost depends on the image: measure it on the initial Gaussians, which
         // code within about 2 % of the fitted ones (1.5 % more on kodim05, 1.1 % on
-        // kodim23), and start again with the count that this cost fits in the budget.
+        // kodim23), and place again the count that this cost fits in the budget. Measured
+        // before the colour solve, which then runs once.
         let scene = Scene {
             width: w,
             height: h,
-            ..fitter.scene()
+            blend: opts.blend,
+            cov_param: CovParam::LogScaleRotation,
+            gaussians: params.clone(),
         };
         let per_g = coded_bytes_per_gaussian(&scene, bits) * 1.02;
         let fits = fitting_count(b, px, per_g);
         if fits.abs_diff(n) * 50 > n {
             n = fits;
-            fitter = new_fitter(n);
+            params = placed(n);
         }
+    }
+    let mut fitter = Fitter::with_params(first, params, opts.blend, opts.loss, opts.seed);
+    if opts.init == Init::Adaptive {
+        fitter.solve_colors(2 * opts.color_solve as usize);
     }
     on_device(&mut fitter, device);
     let mut fitter = match &coarse {
@@ -995,14 +1003,19 @@ pub fn encode(
             fitter.sync();
             let fallback = fitter.fallback.take();
             let params = std::mem::take(&mut fitter.params);
-            drop(fitter);
+            let adam = fitter.adam;
             let mut full = Fitter::with_params(target, params, opts.blend, opts.loss, opts.seed);
+            // The optimizer goes on where it was, moments and all. A fresh one's first
+            // steps move every parameter by its whole learning rate at once (Adam's bias
+            // correction), which undid much of the coarse fit (the scale table's 12 MP
+            // image: 50.0 dB at the first full-resolution step, 29.1 dB ten steps later);
+            // with the state kept, 160 steps half coarse gained 0.6 dB on the validation
+            // images, and a colour solve here gained nothing more (BENCHMARKS.md,
+            // session 12).
+            full.adam = adam;
             full.fallback = fallback;
             if full.fallback.is_none() {
                 on_device(&mut full, device);
-            }
-            if opts.blend == Blend::Sum || opts.init == Init::Adaptive {
-                full.solve_colors(opts.color_solve as usize);
             }
             phase.work_before = f64::from(*steps) * step_work;
             phase.first = *steps;

@@ -355,7 +355,7 @@ pub fn backward(
 
 /// What [`step_l2_sum`] returns: the render, the loss and the gradients of one step.
 pub struct Step {
-    /// Interleaved RGB, not clamped.
+    /// Interleaved RGB, not clamped; empty unless asked for.
     pub image: Vec<f32>,
     /// Mean squared error over the image's values.
     pub loss: f32,
@@ -369,27 +369,37 @@ pub struct Step {
 /// the bits of [`forward`], [`super::loss::LossFn`] and [`backward`] run one after the
 /// other (test `fused_step_gives_the_gradients_of_the_passes`), and the backward pass no
 /// longer evaluates the Gaussians (about half of its work).
-pub fn step_l2_sum(projected: &[Projected], target: &[f32], width: u32, height: u32) -> Step {
+///
+/// The render is kept only `with_image` (a measured step): otherwise [`Step::image`] is
+/// empty, and a 12 MP step allocates and writes 144 MB less.
+pub fn step_l2_sum(
+    projected: &[Projected],
+    target: &[f32],
+    width: u32,
+    height: u32,
+    with_image: bool,
+) -> Step {
     let tiles = TileLists::bin(projected, width, height);
-    let mut image = vec![0f32; (width * height * 3) as usize];
-    let n = image.len() as f32;
-    let band_len = (TILE * width * 3) as usize;
-    let tiles_x = tiles.tiles_x as usize;
-    // Per thread: the tile's render, the loss's gradient and the kept alphas.
-    let scratch = || (Planes::zero(), Vec::new());
-    let per_band = |(acc, kept): &mut (Planes, Vec<f32>), (ty, rows): (usize, &mut [f32])| {
-        let mut slots = Vec::with_capacity(tiles_x);
-        let mut sum = 0f64;
-        for t in ty * tiles_x..(ty + 1) * tiles_x {
-            let list = tiles.list(t);
-            let rect = Rect::of_tile(t, tiles.tiles_x, width, height);
-            *acc = Planes::zero();
-            kept.clear();
-            let keep = list.len() <= lanes::KEPT_LIST_MAX;
-            lanes::forward_tile(list, projected, rect, acc, keep.then_some(&mut *kept));
-            acc.scatter(rows, width, rect);
+    let mut image = vec![
+        0f32;
+        if with_image {
+            (width * height * 3) as usize
+        } else {
+            0
+        }
+    ];
+    let n = (width * height * 3) as f32;
+    let (grads, sum) = sum_tiles(
+        projected,
+        &tiles,
+        width,
+        height,
+        true,
+        with_image.then_some(&mut image[..]),
+        |acc, rect| {
             // `d` = dL/dimage over the tile, as `LossFn::eval` computes it.
             let mut d = Planes::gather(target, width, rect);
+            let mut sum = 0f64;
             for j in rect.y0..rect.y1 {
                 for i in rect.x0..rect.x1 {
                     let l = rect.local(i, j);
@@ -400,27 +410,107 @@ pub fn step_l2_sum(projected: &[Projected], target: &[f32], width: u32, height: 
                     }
                 }
             }
-            let mut out = vec![ProjGrad::default(); list.len()];
-            let kept = keep.then_some(&kept[..]);
-            lanes::backward_tile(list, projected, rect, &d, &mut out, true, kept);
-            slots.push(out);
-        }
-        (slots, sum)
-    };
+            (d, sum)
+        },
+    );
+    Step {
+        image,
+        loss: (sum / f64::from(n)) as f32,
+        grads,
+    }
+}
+
+/// `Aᵀ d(A c)` of `sum` blending, where `A c` renders the colours of `projected` over
+/// `tiles` (into `image`, when given) and `d` maps a rendered tile to the tile of values
+/// the adjoint takes: the colour part of [`backward`] after [`forward`], a tile at a time
+/// on the alphas the forward pass kept, with the same bits (the least-squares colour
+/// solve, where the geometry and so the binning stay fixed across its iterations, and
+/// the contributions that pruning ranks).
+pub(super) fn sum_adjoint(
+    projected: &[Projected],
+    tiles: &TileLists,
+    width: u32,
+    height: u32,
+    image: Option<&mut [f32]>,
+    d: impl Fn(&Planes, Rect) -> Planes + Sync,
+) -> Vec<[f32; 3]> {
+    let (grads, _) = sum_tiles(
+        projected,
+        tiles,
+        width,
+        height,
+        false,
+        image,
+        |acc, rect| (d(acc, rect), 0.0),
+    );
+    grads.into_iter().map(|g| g.color).collect()
+}
+
+/// The tile loop of [`step_l2_sum`] and [`sum_adjoint`]: per tile, render it (into
+/// `image`, when given), let `d` turn the render into the values the backward pass takes
+/// (and a sum it adds up), and run the backward pass for every gradient (`all`) or the
+/// colours only. Bands of tile rows run in parallel; each tile's slots are summed per
+/// Gaussian in tile order afterwards, so the results do not depend on the threads.
+fn sum_tiles(
+    projected: &[Projected],
+    tiles: &TileLists,
+    width: u32,
+    height: u32,
+    all: bool,
+    image: Option<&mut [f32]>,
+    d: impl Fn(&Planes, Rect) -> (Planes, f64) + Sync,
+) -> (Vec<ProjGrad>, f64) {
+    let tiles_x = tiles.tiles_x as usize;
+    // Per thread: the tile's render and the kept alphas.
+    let scratch = || (Planes::zero(), Vec::new());
+    let per_band =
+        |(acc, kept): &mut (Planes, Vec<f32>), ty: usize, mut rows: Option<&mut [f32]>| {
+            let mut slots = Vec::with_capacity(tiles_x);
+            let mut sum = 0f64;
+            for t in ty * tiles_x..(ty + 1) * tiles_x {
+                let list = tiles.list(t);
+                let rect = Rect::of_tile(t, tiles.tiles_x, width, height);
+                *acc = Planes::zero();
+                kept.clear();
+                let keep = list.len() <= lanes::KEPT_LIST_MAX;
+                lanes::forward_tile(list, projected, rect, acc, keep.then_some(&mut *kept));
+                if let Some(rows) = rows.as_deref_mut() {
+                    acc.scatter(rows, width, rect);
+                }
+                let (dt, s) = d(acc, rect);
+                sum += s;
+                let mut out = vec![ProjGrad::default(); list.len()];
+                let kept = keep.then_some(&kept[..]);
+                lanes::backward_tile(list, projected, rect, &dt, &mut out, all, kept);
+                slots.push(out);
+            }
+            (slots, sum)
+        };
+    let band_len = (TILE * width * 3) as usize;
+    let bands_n = height.div_ceil(TILE) as usize;
     #[cfg(feature = "parallel")]
-    let bands: Vec<_> = image
-        .par_chunks_mut(band_len)
-        .enumerate()
-        .map_init(scratch, per_band)
-        .collect();
+    let bands: Vec<_> = match image {
+        Some(image) => image
+            .par_chunks_mut(band_len)
+            .enumerate()
+            .map_init(scratch, |s, (ty, rows)| per_band(s, ty, Some(rows)))
+            .collect(),
+        None => (0..bands_n)
+            .into_par_iter()
+            .map_init(scratch, |s, ty| per_band(s, ty, None))
+            .collect(),
+    };
     #[cfg(not(feature = "parallel"))]
     let bands: Vec<_> = {
         let mut s = scratch();
-        image
-            .chunks_mut(band_len)
-            .enumerate()
-            .map(|item| per_band(&mut s, item))
-            .collect()
+        match image {
+            Some(image) => image
+                .chunks_mut(band_len)
+                .enumerate()
+                .map(|(ty, rows)| per_band(&mut s, ty, Some(rows)))
+                .collect(),
+            None => (0..bands_n).map(|ty| per_band(&mut s, ty, None)).collect(),
+        }
     };
     let mut grads = vec![ProjGrad::default(); projected.len()];
     let mut sum = 0f64;
@@ -433,11 +523,7 @@ pub fn step_l2_sum(projected: &[Projected], target: &[f32], width: u32, height: 
             grads[k as usize].add(g);
         }
     }
-    Step {
-        image,
-        loss: (sum / f64::from(n)) as f32,
-        grads,
-    }
+    (grads, sum)
 }
 
 /// Chain `dL/dalpha` at one pixel to the mean, conic and opacity of the Gaussian.
