@@ -311,9 +311,23 @@ impl<'a> Fitter<'a> {
         seed: u64,
     ) -> Fitter<'a> {
         let params = init::initialize(target, n, init, blend, seed);
+        Fitter::started(target, params, init, blend, loss, seed, 20)
+    }
+
+    /// A fitter from `params` as `init` placed them: with the adaptive start, their
+    /// colours solved first (`solve` iterations).
+    fn started(
+        target: &'a Target,
+        params: GaussianSet,
+        init: Init,
+        blend: Blend,
+        loss: Loss,
+        seed: u64,
+        solve: usize,
+    ) -> Fitter<'a> {
         let mut f = Fitter::with_params(target, params, blend, loss, seed);
         if init == Init::Adaptive {
-            f.solve_colors(20);
+            f.solve_colors(solve);
         }
         f
     }
@@ -975,10 +989,10 @@ pub fn encode(
             params = placed(n);
         }
     }
-    let mut fitter = Fitter::with_params(first, params, opts.blend, opts.loss, opts.seed);
-    if opts.init == Init::Adaptive {
-        fitter.solve_colors(2 * opts.color_solve as usize);
-    }
+    let solve = 2 * opts.color_solve as usize;
+    let mut fitter = Fitter::started(
+        first, params, opts.init, opts.blend, opts.loss, opts.seed, solve,
+    );
     on_device(&mut fitter, device);
     let mut fitter = match &coarse {
         None => {

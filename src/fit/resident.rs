@@ -32,7 +32,7 @@ use crate::format::{BitDepths, Limits, MAX_BITS};
 use crate::gpu::forward::{capacity_for, flatten, FitUniform, Forward, ForwardLists, STRIDE};
 use crate::gpu::{shader, too_big, Gpu, Kernel, PendingRead, SLOT};
 use crate::gpu::{Error, ErrorKind, Result};
-use crate::model::{Blend, GaussianSet};
+use crate::model::{Blend, CovParam, GaussianSet};
 use crate::optim::{Adam, AdamRule, LearningRates};
 use crate::render::RgbImage;
 
@@ -208,11 +208,12 @@ impl<'g> ResidentFit<'g> {
             u.lr = [lr.position, lr.log_scale, lr.rotation, lr.color, lr.opacity];
             u.qat = u32::from(qat.is_some());
             if let Some(b) = qat {
-                let angle = if u.cholesky != 0 {
-                    b.covariance
+                let cov = if u.cholesky != 0 {
+                    CovParam::Cholesky
                 } else {
-                    b.angle
+                    CovParam::LogScaleRotation
                 };
+                let [_, _, angle] = b.of_covariance(cov);
                 u.bits = [b.position, b.covariance, b.color, b.opacity, angle]
                     .map(|b| u32::from(b.min(MAX_BITS)));
             }

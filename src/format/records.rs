@@ -264,6 +264,18 @@ pub struct BitDepths {
     pub opacity: u8,
 }
 
+impl BitDepths {
+    /// The depths of the three covariance components under `cov_param`: the angle of a
+    /// `log-scale-rotation` covariance takes [`BitDepths::angle`].
+    pub fn of_covariance(&self, cov_param: CovParam) -> [u8; 3] {
+        let third = match cov_param {
+            CovParam::LogScaleRotation => self.angle,
+            CovParam::Cholesky => self.covariance,
+        };
+        [self.covariance, self.covariance, third]
+    }
+}
+
 impl Default for BitDepths {
     fn default() -> Self {
         BitDepths {
@@ -299,17 +311,7 @@ impl Records {
                 scene.cov_param,
             ),
             positions: Attribute::fit(&g.positions, [bits.position; 2]),
-            covariance: Attribute::fit(
-                &g.cov,
-                [
-                    bits.covariance,
-                    bits.covariance,
-                    match scene.cov_param {
-                        CovParam::LogScaleRotation => bits.angle,
-                        CovParam::Cholesky => bits.covariance,
-                    },
-                ],
-            ),
+            covariance: Attribute::fit(&g.cov, bits.of_covariance(scene.cov_param)),
             colors: Attribute::fit(&g.colors, [bits.color; 3]),
             opacity,
         }
