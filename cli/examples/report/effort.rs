@@ -41,6 +41,7 @@ fn configs(levels: &[u8], before: bool) -> Vec<Config> {
             coarse: None,
             color_solve: 10,
             lr: BEFORE_RATES,
+            solve_stored_colors: false,
             ..base.clone()
         },
     };
