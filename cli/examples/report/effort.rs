@@ -177,12 +177,13 @@ fn earlier(path: &Path, images: &[String]) -> Vec<(u8, String, Vec<Row>)> {
 }
 
 /// Whether `c` is the fit before effort levels: 400 full-resolution steps at
-/// GaussianImage's rates.
+/// GaussianImage's rates, no final colour solve.
 fn is_before(c: &Config) -> bool {
     c.opts.iterations == 400
         && c.opts.coarse.is_none()
         && c.opts.color_solve == 10
         && c.opts.lr == BEFORE_RATES
+        && !c.opts.solve_stored_colors
 }
 
 /// The learning rates of the fit before effort levels (GaussianImage's), which the
@@ -210,7 +211,8 @@ fn markdown(
          Machine: {}. Commit: `{}`. The {} Kodak images at 1 bpp, on the CPU (`--device cpu`),\n\
          one encode at a time; for each image every configuration of a run in turn. PSNR of the stored\n\
          file; Δ is the mean of each image's difference to the fit before effort levels\n\
-         (400 full-resolution steps at GaussianImage's learning rates, the default before session 10).\n\
+         (400 full-resolution steps at GaussianImage's learning rates, the default before session 10;\n\
+         its colours stored as its last step left them, without the final solve of session 13).\n\
          Regenerate: `cargo run --release --example report -- --effort-only`.\n\n\
          | configuration | steps (coarse share) | colour solve | median time | mean PSNR | Δ PSNR | median N |\n\
          |---|---|---|---|---|---|---|\n",
