@@ -10,6 +10,8 @@
 //! `GSI_PROBE_LR=F` multiplies every learning rate by `F` (how the rates of the levels
 //! were checked, BENCHMARKS.md, session 10). `GSI_PROBE_CURVE=1` prints every progress
 //! report (step, Gaussians, PSNR, seconds since the start), to see where a fit's time goes.
+//! `GSI_PROBE_STORED=0` leaves the stored colours as the last step left them (no final
+//! colour solve: the encoder before session 13).
 
 use gsi::fit::{encode, Budget, Coarse, EncodeOptions, Target};
 use std::time::Instant;
@@ -36,6 +38,7 @@ fn main() {
         iterations: number(0) as u32,
         coarse: (fraction > 0.0 && factor > 1).then_some(Coarse { factor, fraction }),
         color_solve: number(3) as u32,
+        solve_stored_colors: std::env::var("GSI_PROBE_STORED").map_or(true, |v| v != "0"),
         ..EncodeOptions::default()
     };
     let curve = std::env::var_os("GSI_PROBE_CURVE").is_some();
