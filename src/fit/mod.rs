@@ -718,6 +718,7 @@ impl<'a> Fitter<'a> {
         picks.len()
     }
 }
+
 /// Replace `scene`'s colours by their least-squares optimum for its geometry against
 /// `target` (`iterations` conjugate-gradient steps from the colours it has), each
 /// component kept within ±4.
