@@ -41,7 +41,7 @@ pub use error::Error;
 pub use init::Init;
 pub use loss::Loss;
 
-use crate::format::{self, BitDepths, Records, WriteOptions};
+use crate::format::{self, Attribute, BitDepths, Records, WriteOptions};
 use crate::model::{Blend, CovParam, GaussianSet, Scene};
 use crate::optim::{self, Adam};
 use crate::render::{project_scene, Projected, RgbImage};
@@ -1116,10 +1116,11 @@ fn finish(fitter: &mut Fitter, bits: BitDepths, opts: &EncodeOptions) -> Result<
         // are one linear solve away: +0.35 dB at the default level on the validation
         // images (+0.32 dB with half the iterations), +0.13 dB at effort 1, for 2-8 % more
         // time (BENCHMARKS.md, session 13).
+        // Only the colours are quantized again; the geometry's codes stay as they are.
         let mut stored = records.to_scene();
         stored.gaussians.colors = std::mem::take(&mut scene.gaussians.colors);
         solve_scene_colors(&mut stored, &t.data, 2 * opts.color_solve as usize);
-        records = Records::from_scene(&stored, bits);
+        records.colors = Attribute::fit(&stored.gaussians.colors, [bits.color; 3]);
     }
     records.sort_spatially();
     let decoded = crate::render::render(&records.to_scene(), t.width, t.height)?;
