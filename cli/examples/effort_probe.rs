@@ -11,9 +11,11 @@
 //! were checked, BENCHMARKS.md, session 10). `GSI_PROBE_CURVE=1` prints every progress
 //! report (step, Gaussians, PSNR, seconds since the start), to see where a fit's time goes.
 //! `GSI_PROBE_STORED=0` leaves the stored colours as the last step left them (no final
-//! colour solve: the encoder before session 13).
+//! colour solve: the encoder before session 13). `GSI_PROBE_BITS=C,A,K` sets the
+//! covariance, angle and colour depths (the position's stays the default for the size);
+//! `GSI_PROBE_BPP=B` the budget (default 1); `GSI_PROBE_BLEND=alpha` fits in `alpha` mode.
 
-use gsi::fit::{encode, Budget, Coarse, EncodeOptions, Target};
+use gsi::fit::{default_bits, encode, Budget, Coarse, EncodeOptions, Target};
 use std::time::Instant;
 
 fn main() {
@@ -32,17 +34,30 @@ fn main() {
         v.parse()
             .unwrap_or_else(|_| panic!("GSI_PROBE_LR={v} is not a number"))
     });
-    let opts = EncodeOptions {
+    let depths: Option<Vec<u8>> = std::env::var("GSI_PROBE_BITS").ok().map(|v| {
+        v.split(',')
+            .map(|d| d.parse().unwrap_or_else(|_| panic!("GSI_PROBE_BITS={v}")))
+            .collect()
+    });
+    let bpp: f32 = std::env::var("GSI_PROBE_BPP").map_or(1.0, |v| {
+        v.parse()
+            .unwrap_or_else(|_| panic!("GSI_PROBE_BPP={v} is not a number"))
+    });
+    let mut opts = EncodeOptions {
         lr: EncodeOptions::default().lr.scaled(lr_scale),
-        budget: Budget::Bpp(1.0),
+        budget: Budget::Bpp(bpp),
         iterations: number(0) as u32,
         coarse: (fraction > 0.0 && factor > 1).then_some(Coarse { factor, fraction }),
         color_solve: number(3) as u32,
         solve_stored_colors: std::env::var("GSI_PROBE_STORED").map_or(true, |v| v != "0"),
+        blend: match std::env::var("GSI_PROBE_BLEND").as_deref() {
+            Ok("alpha") => gsi::model::Blend::Alpha,
+            _ => gsi::model::Blend::Sum,
+        },
         ..EncodeOptions::default()
     };
     let curve = std::env::var_os("GSI_PROBE_CURVE").is_some();
-    let (mut psnr, mut seconds) = (Vec::new(), Vec::new());
+    let (mut psnr, mut seconds, mut bits_per) = (Vec::new(), Vec::new(), Vec::new());
     for path in &args[4..] {
         let img = image::open(path)
             .unwrap_or_else(|e| panic!("{path}: {e}"))
@@ -56,6 +71,11 @@ fn main() {
                 .map(|&v| f32::from(v) / 255.0)
                 .collect(),
         };
+        if let Some(d) = &depths {
+            let mut bits = default_bits(target.width, target.height, opts.blend);
+            (bits.covariance, bits.angle, bits.color) = (d[0], d[1], d[2]);
+            opts.bits = Some(bits);
+        }
         let t0 = Instant::now();
         let e = encode(&target, &opts, gsi::Device::Cpu, &mut |p| {
             if curve {
@@ -67,19 +87,22 @@ fn main() {
         })
         .expect("encode");
         let s = t0.elapsed().as_secs_f64();
+        let n = e.records.header.count;
         println!(
-            "{path}: N {}  {} bytes  {:.3} dB  {s:.2} s",
-            e.records.header.count,
+            "{path}: N {n}  {} bytes  {:.1} bits/G  {:.3} dB  {s:.2} s",
             e.bytes.len(),
+            e.bytes.len() as f64 * 8.0 / f64::from(n.max(1)),
             e.psnr
         );
+        bits_per.push(e.bytes.len() as f64 * 8.0 / f64::from(n.max(1)));
         psnr.push(e.psnr);
         seconds.push(s);
     }
     seconds.sort_by(f64::total_cmp);
     println!(
-        "mean PSNR {:.3} dB  median time {:.2} s",
+        "mean PSNR {:.3} dB  mean {:.2} bits/G  median time {:.2} s",
         psnr.iter().sum::<f64>() / psnr.len() as f64,
+        bits_per.iter().sum::<f64>() / bits_per.len() as f64,
         seconds[seconds.len() / 2]
     );
 }

@@ -189,20 +189,29 @@ pub struct Encoded {
     pub fallback: Option<String>,
 }
 
-/// Bit depths for an image: positions to 1/4 pixel of the longer side, covariance and
-/// colour 8 bits. Chosen on LOL eval15's normal-light images (not Kodak, which the report
-/// scores) at 0.5 and 1 bpp: of position 12 or 13 bits and covariance and colour 6 to 9
-/// bits, these gave the highest PSNR at both rates (BENCHMARKS.md, session 6). Coarser
-/// codes buy more Gaussians but lose more than they buy. The angle, kept within a quarter
-/// turn since session 11, takes 7 bits: twice the precision the 8 bits over a free angle's
-/// range had, in as many bits. Of 6, 7 and 8 bits on the same images at 1 bpp, 7 and 8
-/// were within 0.03 dB of each other and 6 lost 0.1 dB (BENCHMARKS.md, session 11).
+/// Bit depths for an image: positions to 1/4 pixel of the longer side, colour 8 bits,
+/// and in `sum` mode covariance log-scales 6 bits. Chosen on LOL eval15's normal-light
+/// images (not Kodak, which the report scores) at 0.5 and 1 bpp, where coarser codes buy
+/// more Gaussians within the budget:
+/// * Positions 12 or 13 bits and covariance and colour 6 to 9 bits (BENCHMARKS.md,
+///   session 6): 1/4 pixel was as good as 1/8, and colour below 8 bits lost more than
+///   the extra Gaussians bought back. That still holds: 6 bits lose 0.8 dB, and 7 bits
+///   are within ±0.04 dB of 8 (session 14), so the colour keeps the finer steps, which
+///   stage 2's rewritten colours also use.
+/// * The scales went from 8 to 6 bits in session 14 (+0.23 dB at 1 bpp, +0.17 at
+///   0.5, and +0.24 at effort 1): since session 13 the stored colours are solved for the
+///   stored geometry, which absorbs most of what coarser scales cost. 5 bits lose again
+///   (−0.27 dB at 1 bpp against 6). `alpha` mode was not measured again and keeps 8.
+/// * The angle, kept within a quarter turn since session 11, takes 7 bits: twice the
+///   precision the 8 bits over a free angle's range had, in as many bits. Of 6, 7 and 8
+///   bits on the same images at 1 bpp, 7 and 8 were within 0.03 dB of each other and 6
+///   lost 0.1 dB (session 11); with 6-bit scales, a 6-bit angle loses 0.12 dB (session 14).
 pub fn default_bits(width: u32, height: u32, blend: Blend) -> BitDepths {
     let side = width.max(height).max(2);
     let position = (32 - (side - 1).leading_zeros() + 2).clamp(6, 20) as u8;
     BitDepths {
         position,
-        covariance: 8,
+        covariance: if blend == Blend::Sum { 6 } else { 8 },
         angle: 7,
         color: if blend == Blend::Sum { 8 } else { 7 },
         opacity: 6,
