@@ -201,7 +201,7 @@ fn encode_file(
         .map_err(|e| Failure(format!("{}: {e}", output.display())))?;
     let px = f64::from(target.width) * f64::from(target.height);
     let bytes = encoded.bytes.len() as f64;
-    let summary = format!(
+    let mut summary = format!(
         "N {}  {} bytes  {:.3} bpp  Cr {:.1}x  PSNR {:.2} dB (float fit {:.2})",
         encoded.records.header.count,
         encoded.bytes.len(),
@@ -210,7 +210,24 @@ fn encode_file(
         encoded.psnr,
         encoded.float_psnr
     );
+    if let Some(short) = shortfall(opts, &encoded) {
+        summary = format!("{summary}; {short}");
+    }
     Ok((encoded, summary))
+}
+
+/// What a `--target-psnr` the file fell short of says: the file is written all the same
+/// (it is the best the encoder's bounded growth found), and the shortfall is printed even
+/// under `--quiet`, as a missed `--bpp` is refused aloud.
+fn shortfall(opts: &EncodeOptions, encoded: &fit::Encoded) -> Option<String> {
+    match opts.budget {
+        Budget::TargetPsnr(p) if encoded.psnr < f64::from(p) => Some(format!(
+            "warning: --target-psnr {p} not reached ({:.2} dB with {} Gaussians, as many as \
+             the encoder grows to); --gaussians or --bpp can ask for more",
+            encoded.psnr, encoded.records.header.count
+        )),
+        _ => None,
+    }
 }
 
 pub fn run(args: Args) -> Result<(), Failure> {
@@ -240,6 +257,8 @@ pub fn run(args: Args) -> Result<(), Failure> {
             eprintln!("gsi: {why}");
         }
         eprintln!("{summary}");
+    } else if let Some(short) = shortfall(&opts, &encoded) {
+        eprintln!("gsi: {short}");
     }
     Ok(())
 }

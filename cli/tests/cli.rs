@@ -546,6 +546,51 @@ fn encode_small(input: &Path, output: &Path) -> Vec<u8> {
 /// format give the same .gsi file, bit for bit, as the PNG does. Grey files are read as
 /// grey replicated, 16-bit ones at 16 bits.
 #[test]
+fn a_missed_target_psnr_is_said_even_when_quiet() {
+    let dir = tmp_dir("encode-target");
+    let png = dir.join("a.png");
+    write_png(&png, 24, 16, image::ExtendedColorType::Rgb8);
+    let p = png.to_str().unwrap();
+    let o = dir.join("a.gsi");
+    let o = o.to_str().unwrap();
+    let run = |target: &str, quiet: bool| {
+        let mut args = vec![
+            "encode",
+            p,
+            "-o",
+            o,
+            "--target-psnr",
+            target,
+            "--iterations",
+            "3",
+            "--device",
+            "cpu",
+        ];
+        if quiet {
+            args.push("--quiet");
+        }
+        let out = gsi(&args);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(Path::new(o).exists(), "the file is written all the same");
+        std::fs::remove_file(o).unwrap();
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    for quiet in [false, true] {
+        let said = run("99", quiet);
+        assert!(
+            said.contains("--target-psnr 99 not reached"),
+            "quiet {quiet}: {said}"
+        );
+        let met = run("5", quiet);
+        assert!(!met.contains("not reached"), "quiet {quiet}: {met}");
+    }
+}
+
+#[test]
 fn encode_reads_the_formats_people_have() {
     let dir = tmp_dir("formats");
     let img = test_pixels(36, 20);
