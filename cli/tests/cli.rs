@@ -541,10 +541,8 @@ fn encode_small(input: &Path, output: &Path) -> Vec<u8> {
     std::fs::read(output).unwrap()
 }
 
-/// The formats users bring (the LIME set is BMP; scanners write TIFF; the web WebP; tools
-/// PNM) are read by their bytes, whatever the name says: the same pixels in any lossless
-/// format give the same .gsi file, bit for bit, as the PNG does. Grey files are read as
-/// grey replicated, 16-bit ones at 16 bits.
+/// `--target-psnr` grows N only so far: a target beyond it is written at its best and
+/// the shortfall said, with or without `--quiet`; a target met says nothing more.
 #[test]
 fn a_missed_target_psnr_is_said_even_when_quiet() {
     let dir = tmp_dir("encode-target");
@@ -590,6 +588,10 @@ fn a_missed_target_psnr_is_said_even_when_quiet() {
     }
 }
 
+/// The formats users bring (the LIME set is BMP; scanners write TIFF; the web WebP; tools
+/// PNM) are read by their bytes, whatever the name says: the same pixels in any lossless
+/// format give the same .gsi file, bit for bit, as the PNG does. Grey files are read as
+/// grey replicated, 16-bit ones at 16 bits.
 #[test]
 fn encode_reads_the_formats_people_have() {
     let dir = tmp_dir("formats");

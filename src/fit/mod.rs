@@ -198,9 +198,9 @@ pub struct Encoded {
 /// more Gaussians within the budget:
 /// * Positions 12 or 13 bits and covariance and colour 6 to 9 bits (BENCHMARKS.md,
 ///   session 6): 1/4 pixel was as good as 1/8, and colour below 8 bits lost more than
-///   the extra Gaussians bought back. That still holds: 6 bits lose 0.8 dB, and 7 bits
-///   are within ±0.04 dB of 8 (session 14), so the colour keeps the finer steps, which
-///   stage 2's rewritten colours also use.
+///   the extra Gaussians bought back. In session 14, 6-bit colour lost 0.8 dB again and
+///   7 bits tied with 8 (within ±0.04 dB), so the colour keeps 8 bits: the finer steps
+///   that stage 2's rewritten colours also use.
 /// * The scales went from 8 to 6 bits in session 14 (+0.23 dB at 1 bpp, +0.17 at
 ///   0.5, and +0.24 at effort 1): since session 13 the stored colours are solved for the
 ///   stored geometry, which absorbs most of what coarser scales cost. 5 bits lose again
