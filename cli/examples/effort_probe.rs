@@ -37,8 +37,11 @@ fn main() {
     let depths: Option<Vec<u8>> = std::env::var("GSI_PROBE_BITS").ok().map(|v| {
         v.split(',')
             .map(|d| d.parse().unwrap_or_else(|_| panic!("GSI_PROBE_BITS={v}")))
-            .collect()
+            .collect::<Vec<u8>>()
     });
+    if let Some(d) = &depths {
+        assert_eq!(d.len(), 3, "GSI_PROBE_BITS takes three depths: C,A,K");
+    }
     let bpp: f32 = std::env::var("GSI_PROBE_BPP").map_or(1.0, |v| {
         v.parse()
             .unwrap_or_else(|_| panic!("GSI_PROBE_BPP={v} is not a number"))
