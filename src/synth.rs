@@ -270,18 +270,27 @@ mod corpus {
             bytes: coded(&degenerate(Lsr), [&[2, 2], &[0, 1, 2], &[0, 1, 1], &[2]]),
             expect: None,
         });
-        // Stage 2: a file enhanced in the container (gENH and gORC before GEND).
-        for (name, blend) in [("enhanced-sum-160", Sum), ("enhanced-alpha-160", Alpha)] {
+        // Stage 2: a file enhanced in the container (gENH and gORC before GEND); the
+        // `denoised` ones with a layout-2 gENH (spec §7.2.1).
+        for (name, blend, denoised) in [
+            ("enhanced-sum-160", Sum, false),
+            ("enhanced-alpha-160", Alpha, false),
+            ("enhanced-denoised-sum-160", Sum, true),
+            ("enhanced-denoised-alpha-160", Alpha, true),
+        ] {
             let mut scene = random_scene(13, spec(64, 40, 160, blend, Lsr, blend == Alpha));
             for c in &mut scene.gaussians.colors {
                 *c = c.map(|x| 0.2 * x);
             }
             out.push(CorpusFile {
                 name: format!("{name}.gsi"),
-                bytes: enhanced(&write(
-                    &Records::from_scene(&scene, BitDepths::default()),
-                    "generator=gsi-synth",
-                )),
+                bytes: enhanced(
+                    &write(
+                        &Records::from_scene(&scene, BitDepths::default()),
+                        "generator=gsi-synth",
+                    ),
+                    denoised,
+                ),
                 expect: None,
             });
         }
@@ -289,9 +298,10 @@ mod corpus {
     }
 
     /// `bytes` rewritten by a fixed pseudo-random enhancer (K = 4, hidden 3, a 3×2 map),
-    /// as `gsi enhance` would store one.
-    pub(super) fn enhanced(bytes: &[u8]) -> Vec<u8> {
-        use crate::enhance::{colors_like, mixture::clamp_for, Enhancer};
+    /// as `gsi enhance` would store one; with `denoised`, one that smooths the colours
+    /// first (two passes, range 0.05).
+    pub(super) fn enhanced(bytes: &[u8], denoised: bool) -> Vec<u8> {
+        use crate::enhance::{apply_record, colors_like, mixture::clamp_for, Enhancer};
         let file = format::ChunkedFile::parse(bytes, format::Limits::default()).expect("own file");
         let scene = file.file.records.to_scene();
         let mut rng = super::SplitMix64::new(77);
@@ -313,9 +323,14 @@ mod corpus {
             iterations: 0,
             seed: 77,
         };
-        let record = e.to_record(fit);
-        let applied = Enhancer::from_record(&record)
-            .apply(&scene.gaussians.positions, &scene.gaussians.colors);
+        let mut record = e.to_record(fit);
+        record.denoise = denoised.then_some(format::Denoise {
+            range: 0.05,
+            strength: 1.0,
+            passes: 2,
+        });
+        let applied = apply_record(&record, &scene, &format::Limits::default())
+            .expect("a small scene is within the limits");
         let colors = colors_like(&applied, &file.file.records.colors);
         file.with_colors(&colors, &record, true, 19)
             .expect("in-memory rewrite")
@@ -474,7 +489,7 @@ mod corpus {
             (ChunkType::ENHANCER, "duplicate-genh"),
             (ChunkType::ORIGINAL_COLORS, "duplicate-gorc"),
         ] {
-            let mut p = chunks(&enhanced(&base));
+            let mut p = chunks(&enhanced(&base, false));
             let at = p.iter().position(|(t, _)| *t == ty).expect("stage-2 chunk");
             p.insert(at, p[at].clone());
             files.push((K::ChunkOrder, what, assemble(&p)));

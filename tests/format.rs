@@ -394,3 +394,75 @@ fn stage_two_chunks_are_checked_where_used() {
         2
     );
 }
+
+/// The gENH of the corpus file `name`, parsed, and its payload.
+fn corpus_enhancer(name: &str) -> (format::EnhancerRecord, Vec<u8>) {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/corpus/valid/").to_owned() + name;
+    let f = format::ChunkedFile::parse(&std::fs::read(path).unwrap(), Limits::default()).unwrap();
+    let payload = f
+        .chunks
+        .iter()
+        .find(|c| c.ty == ChunkType::ENHANCER)
+        .expect("an enhanced file")
+        .data
+        .to_vec();
+    (f.enhancer(&Limits::default()).unwrap().unwrap(), payload)
+}
+
+/// §7.2 layout 2: the denoise record sits at offset 68 as the spec's example shows,
+/// layout 1 is still what an enhancer without denoising is written as, and every field
+/// outside its range is refused where the chunk is read.
+#[test]
+fn genh_layout_2_reads_writes_and_refuses_as_specified() {
+    let (plain, plain_bytes) = corpus_enhancer("enhanced-sum-160.gsi");
+    assert_eq!(plain_bytes[0], 1);
+    assert_eq!(plain.denoise, None);
+    let (record, bytes) = corpus_enhancer("enhanced-denoised-sum-160.gsi");
+    assert_eq!(bytes[0], 2);
+    assert_eq!(bytes.len(), plain_bytes.len() + 12);
+    assert_eq!(record.to_payload(19).unwrap(), bytes);
+
+    // The spec's example record, put in place of this one.
+    let example = spec_block("### 7.2.1 Denoising", 1);
+    assert_eq!(example.len(), 12);
+    let mut b = bytes.clone();
+    b[68..80].copy_from_slice(&example);
+    let r = format::EnhancerRecord::parse(&b, &Limits::default()).unwrap();
+    assert_eq!(
+        r.denoise,
+        Some(format::Denoise {
+            range: 0.5,
+            strength: 1.0,
+            passes: 1
+        })
+    );
+
+    let refused = |edit: &dyn Fn(&mut Vec<u8>)| {
+        let mut b = bytes.clone();
+        edit(&mut b);
+        format::EnhancerRecord::parse(&b, &Limits::default())
+            .expect_err("refused")
+            .kind()
+    };
+    let f32_at =
+        |o: usize, x: f32| move |b: &mut Vec<u8>| b[o..o + 4].copy_from_slice(&x.to_be_bytes());
+    for (what, kind) in [
+        ("range 0", refused(&f32_at(68, 0.0))),
+        ("range NaN", refused(&f32_at(68, f32::NAN))),
+        ("range 65", refused(&f32_at(68, 65.0))),
+        ("strength 0", refused(&f32_at(72, 0.0))),
+        ("strength 1.5", refused(&f32_at(72, 1.5))),
+        ("0 passes", refused(&|b| b[76] = 0)),
+        ("9 passes", refused(&|b| b[76] = 9)),
+        ("reserved", refused(&|b| b[79] = 1)),
+    ] {
+        assert_eq!(kind, ErrorKind::InvalidValue, "{what}");
+    }
+    assert_eq!(refused(&|b| b[0] = 3), ErrorKind::UnsupportedVersion);
+    // A layout-2 chunk too short for its denoise record.
+    assert_eq!(refused(&|b| b.truncate(75)), ErrorKind::BadChunkLength);
+    // Layout 1 bytes read as layout 2 lose their first block to the record.
+    let mut as_two = plain_bytes.clone();
+    as_two[0] = 2;
+    assert!(format::EnhancerRecord::parse(&as_two, &Limits::default()).is_err());
+}

@@ -65,6 +65,11 @@ pub struct Args {
     /// Do not keep the original colours (smaller file; --revert becomes impossible).
     #[arg(long, conflicts_with = "revert")]
     discard_original: bool,
+    /// Leave the noise alone: by default the colours are first smoothed across
+    /// neighbouring Gaussians of like size and value (an edge-preserving average; format
+    /// spec §7.2.1), since brightening multiplies a dark image's sensor noise.
+    #[arg(long)]
+    no_denoise: bool,
     /// Seed of the fit's initialization.
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -329,6 +334,11 @@ fn options(args: &Args) -> Result<EnhanceOptions, Failure> {
         iterations: args.iterations,
         experts: args.experts,
         seed: args.seed,
+        denoise: if args.no_denoise {
+            None
+        } else {
+            defaults.denoise
+        },
         params: gsi::enhance::loss::LossParams {
             exposure_target,
             ..defaults.params

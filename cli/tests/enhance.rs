@@ -140,9 +140,18 @@ fn revert_restores_the_original_file_exactly() {
 
 #[test]
 fn apply_from_reproduces_the_fitted_colours() {
-    let before = dark_file(3, 70, Blend::Alpha, 0.2);
+    for blend in [Blend::Alpha, Blend::Sum] {
+        apply_from_reproduces(blend);
+    }
+}
+
+fn apply_from_reproduces(blend: Blend) {
+    let before = dark_file(3, 70, blend, 0.2);
     let after = enhanced(&before, true);
     let lim = Limits::default();
+    // The default enhancer denoises first (gENH layout 2), so this covers both steps.
+    let record = parse(&after).enhancer(&lim).unwrap().unwrap();
+    assert!(record.denoise.is_some(), "{blend:?}: no denoising stored");
     // Applying the stored enhancer to the same original gives the same file.
     let again = enhance::apply_from(&parse(&before), &parse(&after), true, &lim).unwrap();
     assert_eq!(again, after);
@@ -150,7 +159,7 @@ fn apply_from_reproduces_the_fitted_colours() {
     let again = enhance::apply_from(&parse(&after), &parse(&after), true, &lim).unwrap();
     assert_eq!(again, after);
     // Another frame: same enhancer, different colours, no fitting.
-    let other = dark_file(4, 30, Blend::Alpha, 0.25);
+    let other = dark_file(4, 30, blend, 0.25);
     let applied = enhance::apply_from(&parse(&other), &parse(&after), false, &lim).unwrap();
     assert_sane(&applied);
     assert_eq!(

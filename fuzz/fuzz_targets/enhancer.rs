@@ -1,7 +1,7 @@
 //! Any bytes as the payload of the stage-2 chunks `gENH` and `gORC`: `Ok` or `Err`, never
 //! a panic or more memory than the limits allow. An accepted enhancer must write back to
 //! the same record, and applying it must give finite colours within its clamp or the
-//! identity's range.
+//! identity's range; its denoising (layout 2), finite colours.
 
 #![no_main]
 
@@ -9,6 +9,7 @@ mod common;
 
 use gsi::enhance::Enhancer;
 use gsi::format::{EnhancerRecord, OriginalColors};
+use gsi::model::{Blend, CovParam, GaussianSet, Scene};
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
@@ -31,6 +32,32 @@ fuzz_target!(|data: &[u8]| {
         [64.0, -64.0, 0.0],
         [0.0; 3],
     ];
+    // Layout 2: the denoising over a small scene of odd shapes (spec §7.2.1) stays
+    // finite, then feeds the mixture as in `apply_record`.
+    if let Some(d) = &record.denoise {
+        for blend in [Blend::Sum, Blend::Alpha] {
+            let scene = Scene {
+                width: 7,
+                height: 5,
+                blend,
+                cov_param: CovParam::Cholesky,
+                gaussians: GaussianSet {
+                    positions: positions.to_vec(),
+                    cov: vec![
+                        [0.1, 0.0, 0.1],
+                        [0.0; 3],
+                        [16.0, -16.0, 16.0],
+                        [0.2, 0.1, 0.0],
+                    ],
+                    colors: colors.to_vec(),
+                    opacity: None,
+                },
+            };
+            let out = gsi::enhance::denoise::denoise(&scene, &colors, d, &common::limits())
+                .expect("four Gaussians are within the limits");
+            assert!(out.iter().flatten().all(|x| x.is_finite()), "{out:?}");
+        }
+    }
     for (out, c) in e.apply(&positions, &colors).iter().zip(colors) {
         for (o, c) in out.iter().zip(c) {
             // A convex mix of c (identity) and values clamped to the operator range.

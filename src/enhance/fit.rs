@@ -43,6 +43,9 @@ pub struct EnhanceOptions {
     /// Whether the output's mean luma is pulled towards `params.exposure_target`, set on
     /// it, or set on a target metered from the image.
     pub aim: Aim,
+    /// Denoising across neighbouring Gaussians before the mixture (`None`: off). Applied
+    /// by [`super::enhance`], not by [`fit`], which fits the colours it is given.
+    pub denoise: Option<super::denoise::DenoiseOptions>,
     pub seed: u64,
 }
 
@@ -59,6 +62,7 @@ impl Default for EnhanceOptions {
             weights: LossWeights::default(),
             params: LossParams::default(),
             aim: Aim::default(),
+            denoise: Some(super::denoise::DenoiseOptions::default()),
             seed: 0,
         }
     }

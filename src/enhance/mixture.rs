@@ -197,6 +197,7 @@ impl Enhancer {
             map: Attribute::fit(&map, [MAP_BITS]),
             tensors,
             fit,
+            denoise: None,
         }
     }
 

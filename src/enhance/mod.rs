@@ -8,9 +8,11 @@
 //! ([`apply_from`]) or undone exactly ([`ChunkedFile::revert`]).
 //!
 //! * [`mixture`]: the enhancer as stored and applied (no rendering needed).
+//! * [`denoise`]: the smoothing across neighbouring Gaussians that comes before it.
 //! * `exposure`: metering the image, for the exposure to aim at and whether to act.
 //! * `features`, `loss`, `operator`, `fit`: fitting it (feature `encode`).
 
+pub mod denoise;
 pub mod mixture;
 
 #[cfg(feature = "encode")]
@@ -28,7 +30,8 @@ pub mod operator;
 
 pub use mixture::Enhancer;
 
-use crate::format::{Attribute, ChunkedFile, Limits, Records, Result};
+use crate::format::{Attribute, ChunkedFile, EnhancerRecord, Limits, Records, Result};
+use crate::model::Scene;
 
 /// The records a file holds before any enhancement: its geometry with the colours in
 /// `gORC` when it has them, else those in `GCOL`. Stage 2 reads the scene to enhance
@@ -65,15 +68,30 @@ pub fn apply_from(
             "the source file has no gENH chunk",
         )
     })?;
-    let enhancer = Enhancer::from_record(&record);
     let base = base_records(target, limits)?;
-    let scene = base.to_scene();
-    let colors = enhancer.apply(&scene.gaussians.positions, &scene.gaussians.colors);
+    let colors = apply_record(&record, &base.to_scene(), limits)?;
     rewrite(target, &base, &colors, &record, keep_original)
 }
 
+/// The colours the stored enhancer `record` makes of `scene`'s (spec §7.2): its
+/// denoising first, where it has one, then the mixture. Fails only where the denoising
+/// would pass `limits`.
+pub fn apply_record(
+    record: &EnhancerRecord,
+    scene: &Scene,
+    limits: &Limits,
+) -> Result<Vec<[f32; 3]>> {
+    let g = &scene.gaussians;
+    let colors = match &record.denoise {
+        Some(d) => denoise::denoise(scene, &g.colors, d, limits)?,
+        None => g.colors.clone(),
+    };
+    Ok(Enhancer::from_record(record).apply(&g.positions, &colors))
+}
+
 /// Fit an enhancer to the file's (original) colours, with its mixture on `device`, and
-/// return the rewritten file with what the fit did. The caller decides beforehand whether
+/// return the rewritten file with what the fit did. With `opts.denoise`, the colours are
+/// denoised first and the enhancer stores how. The caller decides beforehand whether
 /// the image needs it ([`fit::scene_metering`], [`exposure::Metering::is_low_light`]).
 #[cfg(feature = "encode")]
 pub fn enhance(
@@ -85,8 +103,18 @@ pub fn enhance(
     progress: &mut dyn FnMut(&fit::Progress),
 ) -> Result<(Vec<u8>, fit::Fitted)> {
     let base = base_records(file, limits)?;
-    let scene = base.to_scene();
-    let fitted = fit::fit(&scene, opts, &features::FeatureBank, device, progress);
+    let mut scene = base.to_scene();
+    // Denoised first, so that the fit sees (and its losses measure) the cleaner image.
+    let mut stored_denoise = None;
+    if let Some(o) = &opts.denoise {
+        let nb = denoise::Neighbours::new(&scene, limits)?;
+        stored_denoise = o.resolve(&nb, &scene.gaussians.colors);
+        if let Some(d) = &stored_denoise {
+            scene.gaussians.colors = nb.denoise(&scene.gaussians.colors, d);
+        }
+    }
+    let mut fitted = fit::fit(&scene, opts, &features::FeatureBank, device, progress);
+    fitted.record.denoise = stored_denoise;
     let bytes = rewrite(file, &base, &fitted.colors, &fitted.record, keep_original)?;
     Ok((bytes, fitted))
 }

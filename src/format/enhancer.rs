@@ -10,10 +10,19 @@ use super::limits::{AllocBudget, Limits};
 use super::records::Attribute;
 use byteorder::{BigEndian, ByteOrder, WriteBytesExt};
 
-/// Version of the `gENH` layout written by this crate.
+/// `gENH` layout of an enhancer without denoising: the only layout before it had one.
 pub const ENHANCER_VERSION: u8 = 1;
-/// Fixed part of a `gENH` payload; seven length-prefixed attribute blocks follow.
+/// `gENH` layout of an enhancer that denoises first: layout 1 with a [`Denoise`] record
+/// between the fixed part and the blocks. Written only where there is one, so that an
+/// enhancer without it stays readable by every decoder of layout 1.
+pub const ENHANCER_VERSION_DENOISED: u8 = 2;
+/// Fixed part of a `gENH` payload of layout 1; seven length-prefixed attribute blocks
+/// follow (after the [`DENOISE_LEN`]-byte denoise record, in layout 2).
 pub const ENHANCER_FIXED_LEN: usize = 68;
+/// Bytes of the denoise record of layout 2.
+pub const DENOISE_LEN: usize = 12;
+/// Most denoising passes a `gENH` may ask for.
+pub const MAX_DENOISE_PASSES: u8 = 8;
 /// Shortest `gENH` payload: the fixed part and seven empty one-component blocks.
 pub const MIN_ENHANCER_LEN: usize =
     ENHANCER_FIXED_LEN + 7 * (4 + super::records::attribute_preamble_len(1));
@@ -41,6 +50,19 @@ pub struct FitSettings {
     pub seed: u64,
 }
 
+/// The smoothing across neighbouring Gaussians that runs before the mixture (spec
+/// §7.2.1): how far apart two colours may be and still be averaged, how far each step
+/// goes, and how many steps. What the numbers do is `crate::enhance::denoise`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Denoise {
+    /// Range `r`: neighbours whose values differ by about `r` or more are barely mixed.
+    pub range: f32,
+    /// Strength `s` in `(0, 1]`: the share of each step taken.
+    pub strength: f32,
+    /// Passes, `1..=MAX_DENOISE_PASSES`.
+    pub passes: u8,
+}
+
 /// A `gENH` chunk: the mixture of colour operators and the weight map that mixes them.
 ///
 /// Every learned number is stored quantized (as an [`Attribute`] of one component, the
@@ -63,6 +85,8 @@ pub struct EnhancerRecord {
     /// of operators 1..K, operator-major within each tensor, row-major matrices.
     pub tensors: [Attribute; TENSORS],
     pub fit: FitSettings,
+    /// Smoothing applied to the colours before the mixture (layout 2), if any.
+    pub denoise: Option<Denoise>,
 }
 
 /// Number of values in each of the six tensors of one operator.
@@ -79,7 +103,11 @@ impl EnhancerRecord {
     /// The payload of a `gENH` chunk.
     pub fn to_payload(&self, zstd_level: i32) -> Result<Vec<u8>> {
         self.validate()?;
-        let mut out = vec![ENHANCER_VERSION, self.experts, self.hidden, 0];
+        let version = match self.denoise {
+            None => ENHANCER_VERSION,
+            Some(_) => ENHANCER_VERSION_DENOISED,
+        };
+        let mut out = vec![version, self.experts, self.hidden, 0];
         out.write_f32::<BigEndian>(self.clamp[0])?;
         out.write_f32::<BigEndian>(self.clamp[1])?;
         out.write_u16::<BigEndian>(self.map_width)?;
@@ -95,6 +123,11 @@ impl EnhancerRecord {
             out.write_f32::<BigEndian>(*x)?;
         }
         debug_assert_eq!(out.len(), ENHANCER_FIXED_LEN);
+        if let Some(d) = &self.denoise {
+            out.write_f32::<BigEndian>(d.range)?;
+            out.write_f32::<BigEndian>(d.strength)?;
+            out.extend_from_slice(&[d.passes, 0, 0, 0]);
+        }
         for a in std::iter::once(&self.map).chain(&self.tensors) {
             let p = a.to_payload(zstd_level)?;
             out.write_u32::<BigEndian>(p.len() as u32)?;
@@ -108,6 +141,9 @@ impl EnhancerRecord {
         check_shape(self.experts, self.hidden, self.map_width, self.map_height)?;
         check_clamp(self.clamp)?;
         check_fit(&self.fit)?;
+        if let Some(d) = &self.denoise {
+            check_denoise(d)?;
+        }
         for (a, n) in std::iter::once(&self.map)
             .chain(&self.tensors)
             .zip(self.counts())
@@ -133,11 +169,25 @@ impl EnhancerRecord {
                 ),
             ));
         }
-        if p[0] != ENHANCER_VERSION {
+        let blocks_at = match p[0] {
+            ENHANCER_VERSION => ENHANCER_FIXED_LEN,
+            ENHANCER_VERSION_DENOISED => ENHANCER_FIXED_LEN + DENOISE_LEN,
+            v => {
+                return Err(Error::new(
+                    ErrorKind::UnsupportedVersion,
+                    format!(
+                        "gENH layout {v}, this decoder reads {ENHANCER_VERSION} and \
+                         {ENHANCER_VERSION_DENOISED}"
+                    ),
+                ))
+            }
+        };
+        if p.len() < blocks_at {
             return Err(Error::new(
-                ErrorKind::UnsupportedVersion,
+                ErrorKind::BadChunkLength,
                 format!(
-                    "gENH layout {}, this decoder reads {ENHANCER_VERSION}",
+                    "{} bytes, shorter than the {blocks_at}-byte preamble of gENH layout {}",
+                    p.len(),
                     p[0]
                 ),
             ));
@@ -158,9 +208,24 @@ impl EnhancerRecord {
         check_shape(experts, hidden, map_width, map_height)?;
         check_clamp(clamp)?;
         check_fit(&fit)?;
+        let denoise = if blocks_at > ENHANCER_FIXED_LEN {
+            let d = &p[ENHANCER_FIXED_LEN..blocks_at];
+            if d[9..12] != [0, 0, 0] {
+                return Err(invalid("gENH denoise record: reserved bytes not 0"));
+            }
+            let d = Denoise {
+                range: BigEndian::read_f32(&d[0..4]),
+                strength: BigEndian::read_f32(&d[4..8]),
+                passes: d[8],
+            };
+            check_denoise(&d)?;
+            Some(d)
+        } else {
+            None
+        };
 
         let mut budget = AllocBudget::new(limits);
-        let mut rest = &p[ENHANCER_FIXED_LEN..];
+        let mut rest = &p[blocks_at..];
         let mut blocks = Vec::with_capacity(7);
         for (b, n) in counts(experts, hidden, map_width, map_height)
             .into_iter()
@@ -208,6 +273,7 @@ impl EnhancerRecord {
             map,
             tensors,
             fit,
+            denoise,
         })
     }
 }
@@ -260,6 +326,19 @@ fn check_fit(f: &FitSettings) -> Result<()> {
         .chain([&f.exposure, &f.saturation_tau, &f.contrast_gamma]);
     if all.clone().any(|x| !x.is_finite()) {
         return Err(invalid("non-finite enhancer loss setting"));
+    }
+    Ok(())
+}
+
+/// Spec §7.2.1: a range in `(0, 64]`, a strength in `(0, 1]`, `1..=8` passes.
+fn check_denoise(d: &Denoise) -> Result<()> {
+    let range_ok = d.range > 0.0 && d.range <= crate::contract::COLOR_MAX;
+    let strength_ok = d.strength > 0.0 && d.strength <= 1.0;
+    if !(range_ok && strength_ok && (1..=MAX_DENOISE_PASSES).contains(&d.passes)) {
+        return Err(invalid(format!(
+            "gENH denoise: range {}, strength {}, {} passes",
+            d.range, d.strength, d.passes
+        )));
     }
     Ok(())
 }

@@ -39,6 +39,8 @@ struct Row {
     metered_luma: f32,
     /// The figures with `--exposure auto`.
     metered: [f64; 8],
+    /// The figures with `--no-denoise`: the default without its denoising.
+    plain: [f64; 8],
     /// Mean luma of the reference.
     reference_luma: f64,
     /// psnr, ssim, psnr_gm, ssim_gm, loe, de, eme, niqe
@@ -148,8 +150,22 @@ fn run_set(
             &mut |_| {},
         )
         .expect("enhance");
+        let plain_opts = EnhanceOptions {
+            denoise: None,
+            ..opts.clone()
+        };
+        let (plain_bytes, _) = gsi::enhance::enhance(
+            &file,
+            &plain_opts,
+            false,
+            &Limits::default(),
+            gsi::Device::Cpu,
+            &mut |_| {},
+        )
+        .expect("enhance");
         let px = f64::from(w * h);
         let row = Row {
+            plain: figures(&low, &high, &decode(&plain_bytes), w, h),
             metered_target: metered_fit.record.fit.exposure,
             metered_luma: metered_fit.mean_luma.1,
             metered: figures(&low, &high, &decode(&metered_bytes), w, h),
@@ -196,6 +212,7 @@ fn rows_json(rows: &[Row]) -> serde_json::Value {
         "encode_s": r.encode_s, "enhance_s": r.enhance_s, "mean_luma": [r.luma.0, r.luma.1],
         "target": r.target, "reference_luma": r.reference_luma,
         "metered_target": r.metered_target, "metered_luma": r.metered_luma, "metered": r.metered,
+        "no_denoise": r.plain,
         "psnr": r.gsi[0], "ssim": r.gsi[1], "psnr_gm": r.gsi[2], "ssim_gm": r.gsi[3],
         "loe": r.gsi[4], "de": r.gsi[5], "eme": r.gsi[6], "niqe": r.gsi[7],
         "auto_gamma": r.auto_gamma, "input": r.input, "paper_exposure_0_7": r.paper_exposure,
@@ -313,10 +330,11 @@ fn markdown(
          Machine: {}. Commit: `{}`. Produced by `cargo run --release --example report -- --enhance-only`.\n\n\
          Each of the {} low-light images is encoded at {BPP} bpp (stage 1, default settings), enhanced with \
          `gsi enhance` defaults ({} iterations, K = {}, hidden {}, working size {} px, exposure target {}, \
-         the paper's loss weights), decoded at 600×400 and scored against `high` with `gsi::metrics` \
+         the paper's loss weights, denoising across neighbouring Gaussians first: {:?}), decoded at 600×400 and scored against `high` with `gsi::metrics` \
          (the conventions of `../shared/data/README.md`; LOE against the low input). \
          Reference rows are that README's, measured on the raw images.\n",
-        stamp.0, stamp.1, rows.len(), opts.iterations, opts.experts, opts.hidden, opts.work_side, opts.params.exposure_target
+        stamp.0, stamp.1, rows.len(), opts.iterations, opts.experts, opts.hidden, opts.work_side, opts.params.exposure_target,
+        opts.denoise
     );
     let _ = writeln!(s, "{TABLE_HEAD}");
     measured_row(
@@ -324,6 +342,12 @@ fn markdown(
         rows,
         &format!("**gsi** (encode {BPP} bpp → enhance → decode)"),
         |r| Some(&r.gsi),
+    );
+    measured_row(
+        &mut s,
+        rows,
+        "gsi `--no-denoise` (the default without its denoising)",
+        |r| Some(&r.plain),
     );
     measured_row(
         &mut s,
@@ -389,6 +413,7 @@ fn markdown(
             &format!("**gsi** (encode {BPP} bpp → enhance → decode)"),
             |r| Some(&r.gsi),
         );
+        measured_row(&mut s, syn, "gsi `--no-denoise`", |r| Some(&r.plain));
         measured_row(
             &mut s,
             syn,
