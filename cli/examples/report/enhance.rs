@@ -330,11 +330,17 @@ fn markdown(
          Machine: {}. Commit: `{}`. Produced by `cargo run --release --example report -- --enhance-only`.\n\n\
          Each of the {} low-light images is encoded at {BPP} bpp (stage 1, default settings), enhanced with \
          `gsi enhance` defaults ({} iterations, K = {}, hidden {}, working size {} px, exposure target {}, \
-         the paper's loss weights, denoising across neighbouring Gaussians first: {:?}), decoded at 600×400 and scored against `high` with `gsi::metrics` \
+         the paper's loss weights, {}), decoded at 600×400 and scored against `high` with `gsi::metrics` \
          (the conventions of `../shared/data/README.md`; LOE against the low input). \
          Reference rows are that README's, measured on the raw images.\n",
         stamp.0, stamp.1, rows.len(), opts.iterations, opts.experts, opts.hidden, opts.work_side, opts.params.exposure_target,
-        opts.denoise
+        match opts.denoise {
+            Some(d) => format!(
+                "denoised first across neighbouring Gaussians: range {} spreads, strength {}, {} passes",
+                d.range_spreads, d.strength, d.passes
+            ),
+            None => "no denoising".to_owned(),
+        }
     );
     let _ = writeln!(s, "{TABLE_HEAD}");
     measured_row(
