@@ -283,7 +283,10 @@ fn enhance_file(
         let start = std::time::Instant::now();
         let (out, fitted) =
             enhance::enhance(&file, &opts, keep, &limits, on, progress).map_err(named)?;
-        if let Some(why) = &fitted.fallback {
+        for why in [&fitted.fallback, &fitted.denoise_skipped]
+            .into_iter()
+            .flatten()
+        {
             lines.push(format!("gsi: {why}"));
         }
         let aim = match opts.aim {

@@ -170,6 +170,41 @@ fn apply_from_reproduces(blend: Blend) {
     assert!(enhance::apply_from(&parse(&other), &parse(&before), false, &lim).is_err());
 }
 
+/// A scene whose footprints overlap past the neighbour search's share of the memory
+/// limit is still enhanced, without denoising (layout 1), and the caller is told why.
+#[test]
+fn too_much_overlap_for_denoising_is_enhanced_without_it() {
+    let before = dark_file(5, 400, Blend::Sum, 0.2);
+    let tight = Limits {
+        max_alloc: 8 * 50_000,
+        ..Limits::default()
+    };
+    let (bytes, fitted) = enhance::enhance(
+        &parse(&before),
+        &quick(),
+        true,
+        &tight,
+        gsi::Device::Cpu,
+        &mut |_| {},
+    )
+    .unwrap();
+    assert!(fitted.record.denoise.is_none());
+    let why = fitted.denoise_skipped.expect("the skip is reported");
+    assert!(why.contains("denoising"), "{why}");
+    assert_eq!(payload(&parse(&bytes), ChunkType::ENHANCER).unwrap()[0], 1);
+    // With the default limits the same file is denoised.
+    let (_, fitted) = enhance::enhance(
+        &parse(&before),
+        &quick(),
+        true,
+        &Limits::default(),
+        gsi::Device::Cpu,
+        &mut |_| {},
+    )
+    .unwrap();
+    assert!(fitted.record.denoise.is_some() && fitted.denoise_skipped.is_none());
+}
+
 #[test]
 fn degenerate_scenes_stay_finite_and_in_range() {
     let black = dark_file(5, 40, Blend::Sum, 0.0);

@@ -92,6 +92,9 @@ pub struct Fitted {
     pub mean_luma: (f32, f32),
     /// Why the fit left the GPU it was given for the CPU, if it did.
     pub fallback: Option<String>,
+    /// Why the colours were not denoised though the options asked for it, if they were
+    /// not (set by [`super::enhance`]).
+    pub denoise_skipped: Option<String>,
 }
 
 /// The working size for an image of `width × height`: scaled so the long side is at
@@ -525,6 +528,7 @@ impl<'a> Session<'a> {
             terms,
             mean_luma: (mean_luma(&self.low), mean_luma(&self.shown)),
             fallback: self.fallback.take(),
+            denoise_skipped: None,
         }
     }
 }

@@ -104,17 +104,28 @@ pub fn enhance(
 ) -> Result<(Vec<u8>, fit::Fitted)> {
     let base = base_records(file, limits)?;
     let mut scene = base.to_scene();
-    // Denoised first, so that the fit sees (and its losses measure) the cleaner image.
+    // Denoised first, so that the fit sees (and its losses measure) the cleaner image. A
+    // scene whose footprints overlap too much for the neighbour search (within `limits`)
+    // is enhanced without it, and the caller is told.
     let mut stored_denoise = None;
+    let mut skipped = None;
     if let Some(o) = &opts.denoise {
-        let nb = denoise::Neighbours::new(&scene, limits)?;
-        stored_denoise = o.resolve(&nb, &scene.gaussians.colors);
-        if let Some(d) = &stored_denoise {
-            scene.gaussians.colors = nb.denoise(&scene.gaussians.colors, d);
+        match denoise::Neighbours::new(&scene, limits) {
+            Ok(nb) => {
+                stored_denoise = o.resolve(&nb, &scene.gaussians.colors);
+                if let Some(d) = &stored_denoise {
+                    scene.gaussians.colors = nb.denoise(&scene.gaussians.colors, d);
+                }
+            }
+            Err(e) if e.kind() == crate::format::ErrorKind::LimitExceeded => {
+                skipped = Some(format!("enhanced without denoising: {e}"));
+            }
+            Err(e) => return Err(e),
         }
     }
     let mut fitted = fit::fit(&scene, opts, &features::FeatureBank, device, progress);
     fitted.record.denoise = stored_denoise;
+    fitted.denoise_skipped = skipped;
     let bytes = rewrite(file, &base, &fitted.colors, &fitted.record, keep_original)?;
     Ok((bytes, fitted))
 }
