@@ -1,6 +1,7 @@
 //! One stage-2 enhancement iteration (mixture forward, `A·c`, zero-shot loss, backward,
 //! Adam) on a 600×400 scene of 4000 Gaussians, the size of a LOL image at about 1 bpp,
-//! and applying a stored enhancer to every colour (`--apply-from`).
+//! applying a stored enhancer to every colour (`--apply-from`), and the denoising that
+//! comes before the mixture (neighbour search and two passes).
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use gsi::enhance::features::FeatureBank;
@@ -34,6 +35,19 @@ fn enhance_iteration(c: &mut Criterion) {
         let g = &scene.gaussians;
         group.bench_function(format!("{}/apply/4k", blend.name()), |b| {
             b.iter(|| black_box(fitted.enhancer.apply(&g.positions, &g.colors)))
+        });
+        let denoise = gsi::format::Denoise {
+            range: 0.02,
+            strength: 1.0,
+            passes: 2,
+        };
+        let limits = gsi::format::Limits::default();
+        group.bench_function(format!("{}/denoise/4k", blend.name()), |b| {
+            b.iter(|| {
+                black_box(gsi::enhance::denoise::denoise(
+                    &scene, &g.colors, &denoise, &limits,
+                ))
+            })
         });
         group.bench_function(format!("{}/setup/4k", blend.name()), |b| {
             b.iter(|| black_box(Session::new(&scene, &opts, &FeatureBank)))

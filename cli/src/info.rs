@@ -119,6 +119,9 @@ fn to_json(f: &GsiFile) -> serde_json::Value {
                 "map": [e.map_width, e.map_height],
                 "iterations": e.fit.iterations,
                 "exposure": e.fit.exposure,
+                "denoise": e.denoise.map(|d| json!({
+                    "range": d.range, "strength": d.strength, "passes": d.passes,
+                })),
                 "revertible": stage.revertible,
             }),
         },
@@ -181,7 +184,14 @@ fn to_text(f: &GsiFile) -> String {
     match &st.enhancer {
         Some(Ok(e)) => {
             s += &format!(
-                "enhanced: {} colour operators (hidden {}), {}x{} weight map, fitted in {} iterations to exposure {}; {}\n",
+                "enhanced: {}{} colour operators (hidden {}), {}x{} weight map, fitted in {} iterations to exposure {}; {}\n",
+                match e.denoise {
+                    Some(d) => format!(
+                        "denoised ({} passes, range {:.4}, strength {}), then ",
+                        d.passes, d.range, d.strength
+                    ),
+                    None => String::new(),
+                },
                 e.experts,
                 e.hidden,
                 e.map_width,

@@ -339,9 +339,14 @@ fn cli_in_place_revert_and_apply_from() {
     let json: serde_json::Value = serde_json::from_slice(&info.stdout).unwrap();
     assert_eq!(json["enhancer"]["experts"], 16);
     assert_eq!(json["enhancer"]["revertible"], true);
+    assert_eq!(json["enhancer"]["denoise"]["passes"], 2);
     assert_eq!(json["file_bytes"].as_u64(), Some(after.len() as u64));
     let text = String::from_utf8(gsi(&["info", p]).stdout).unwrap();
-    assert!(text.contains("enhanced: 16 colour operators"), "{text}");
+    assert!(
+        text.contains("enhanced: denoised (2 passes, range ")
+            && text.contains("then 16 colour operators"),
+        "{text}"
+    );
 
     // A failure (a source without an enhancer) leaves the file untouched, with exit 1.
     let plain = tmp("plain.gsi");

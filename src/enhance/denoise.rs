@@ -21,16 +21,24 @@
 use crate::format::{Denoise, Error, ErrorKind, Limits, Result};
 use crate::model::{Blend, Scene};
 
-/// Least affinity (Bhattacharyya coefficient) of two neighbours, and least value of a
-/// footprint at a centre for it to count there (spec §7.2.1).
-pub const NEAR_MIN: f32 = 1.0 / 256.0;
+/// Least affinity (Bhattacharyya coefficient) of two neighbours (spec §7.2.1). Weaker
+/// pairs add little each, but a large, dense scene has thousands of them per Gaussian:
+/// at 1/256 a 10.7-megapixel file of 278 000 Gaussians passed the search's memory
+/// budget, while LOL eval15 and the synthetic Kodak set scored the same at either
+/// threshold (BENCHMARKS.md, session 15).
+pub const NEAR_MIN: f32 = 1.0 / 16.0;
+
+/// Least value of a footprint at a centre for it to count in the value there (spec
+/// §7.2.1). Lower than [`NEAR_MIN`]: the value at a centre is a sum of many footprints,
+/// and the weak ones together are not negligible.
+pub const REACH_MIN: f32 = 1.0 / 256.0;
 
 /// Half-side of the box a Gaussian is binned with, in standard deviations along its
 /// major axis. Two Gaussians whose boxes do not meet are more than `2·BOX_SIGMAS`
 /// major-axis deviations apart, which bounds their affinity by `exp(−BOX_SIGMAS²/4)`
-/// (0.0019 < [`NEAR_MIN`]) and each one's footprint at the other's centre by
-/// `exp(−BOX_SIGMAS²/2)`: the boxes find every pair the spec counts.
-const BOX_SIGMAS: f32 = 5.0;
+/// (0.047 < [`NEAR_MIN`]), and a footprint outside its box by `exp(−BOX_SIGMAS²/2)`
+/// (0.0022 < [`REACH_MIN`]): the boxes find every pair the spec counts.
+const BOX_SIGMAS: f32 = 3.5;
 
 /// Each Gaussian's neighbours (by affinity) and the footprints that reach its centre,
 /// in compressed-row form, indices increasing within a row.
@@ -227,7 +235,7 @@ impl Neighbours {
                     let j = j as usize;
                     let d = [centre[i][0] - centre[j][0], centre[i][1] - centre[j][1]];
                     let g = (-0.5 * mahalanobis(d, cov[j])).exp();
-                    if g >= NEAR_MIN {
+                    if g >= REACH_MIN {
                         out.reach.push(j as u32);
                         out.footprint.push(g);
                     }
