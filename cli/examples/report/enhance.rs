@@ -118,51 +118,36 @@ fn run_set(
             gsi::render::render(&scene, w, h).expect("render").to_rgb8()
         };
         let out = decode(&kept);
-        let paper_exposure = paper.then(|| {
-            let paper_opts = EnhanceOptions {
-                params: gsi::enhance::loss::LossParams {
-                    exposure_target: 0.7,
-                    ..opts.params
-                },
-                ..opts.clone()
-            };
-            let (bytes, _) = gsi::enhance::enhance(
+        // The variants beside the default: the same file, other options, gORC dropped.
+        let variant = |o: &EnhanceOptions| {
+            gsi::enhance::enhance(
                 &file,
-                &paper_opts,
+                o,
                 false,
                 &Limits::default(),
                 gsi::Device::Cpu,
                 &mut |_| {},
             )
-            .expect("enhance");
+            .expect("enhance")
+        };
+        let paper_exposure = paper.then(|| {
+            let (bytes, _) = variant(&EnhanceOptions {
+                params: gsi::enhance::loss::LossParams {
+                    exposure_target: 0.7,
+                    ..opts.params
+                },
+                ..opts.clone()
+            });
             figures(&low, &high, &decode(&bytes), w, h)
         });
-        let metered_opts = EnhanceOptions {
+        let (metered_bytes, metered_fit) = variant(&EnhanceOptions {
             aim: Aim::Metered,
             ..opts.clone()
-        };
-        let (metered_bytes, metered_fit) = gsi::enhance::enhance(
-            &file,
-            &metered_opts,
-            false,
-            &Limits::default(),
-            gsi::Device::Cpu,
-            &mut |_| {},
-        )
-        .expect("enhance");
-        let plain_opts = EnhanceOptions {
+        });
+        let (plain_bytes, _) = variant(&EnhanceOptions {
             denoise: None,
             ..opts.clone()
-        };
-        let (plain_bytes, _) = gsi::enhance::enhance(
-            &file,
-            &plain_opts,
-            false,
-            &Limits::default(),
-            gsi::Device::Cpu,
-            &mut |_| {},
-        )
-        .expect("enhance");
+        });
         let px = f64::from(w * h);
         let row = Row {
             plain: figures(&low, &high, &decode(&plain_bytes), w, h),
