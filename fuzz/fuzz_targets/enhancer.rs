@@ -32,8 +32,8 @@ fuzz_target!(|data: &[u8]| {
         [64.0, -64.0, 0.0],
         [0.0; 3],
     ];
-    // Layout 2: the denoising over a small scene of odd shapes (spec §7.2.1) stays
-    // finite, then feeds the mixture as in `apply_record`.
+    // Layout 2: the denoising (spec §7.2.1) over a small scene of odd shapes, a NaN
+    // centre and extreme colours included, stays finite in both blend modes.
     if let Some(d) = &record.denoise {
         for blend in [Blend::Sum, Blend::Alpha] {
             let scene = Scene {
