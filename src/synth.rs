@@ -271,12 +271,15 @@ mod corpus {
             expect: None,
         });
         // Stage 2: a file enhanced in the container (gENH and gORC before GEND); the
-        // `denoised` ones with a layout-2 gENH (spec §7.2.1).
-        for (name, blend, denoised) in [
-            ("enhanced-sum-160", Sum, false),
-            ("enhanced-alpha-160", Alpha, false),
-            ("enhanced-denoised-sum-160", Sum, true),
-            ("enhanced-denoised-alpha-160", Alpha, true),
+        // `denoised` ones with a layout-2 gENH (spec §7.2.1), the `toned` ones with a
+        // layout-3 gENH (§7.2.2), with both records and with the tone record alone.
+        for (name, blend, denoised, toned) in [
+            ("enhanced-sum-160", Sum, false, false),
+            ("enhanced-alpha-160", Alpha, false, false),
+            ("enhanced-denoised-sum-160", Sum, true, false),
+            ("enhanced-denoised-alpha-160", Alpha, true, false),
+            ("enhanced-denoised-toned-sum-160", Sum, true, true),
+            ("enhanced-toned-alpha-160", Alpha, false, true),
         ] {
             let mut scene = random_scene(13, spec(64, 40, 160, blend, Lsr, blend == Alpha));
             for c in &mut scene.gaussians.colors {
@@ -290,6 +293,7 @@ mod corpus {
                         "generator=gsi-synth",
                     ),
                     denoised,
+                    toned,
                 ),
                 expect: None,
             });
@@ -299,8 +303,9 @@ mod corpus {
 
     /// `bytes` rewritten by a fixed pseudo-random enhancer (K = 4, hidden 3, a 3×2 map),
     /// as `gsi enhance` would store one; with `denoised`, one that smooths the colours
-    /// first (two passes, range 0.05).
-    pub(super) fn enhanced(bytes: &[u8], denoised: bool) -> Vec<u8> {
+    /// first (two passes, range 0.05); with `toned`, one that ends with a tone curve
+    /// (`1.3·x^0.7`, three passes).
+    pub(super) fn enhanced(bytes: &[u8], denoised: bool, toned: bool) -> Vec<u8> {
         use crate::enhance::{apply_record, colors_like, mixture::clamp_for, Enhancer};
         let file = format::ChunkedFile::parse(bytes, format::Limits::default()).expect("own file");
         let scene = file.file.records.to_scene();
@@ -328,6 +333,11 @@ mod corpus {
             range: 0.05,
             strength: 1.0,
             passes: 2,
+        });
+        record.tone = toned.then_some(format::Tone {
+            exponent: 0.7,
+            scale: 1.3,
+            passes: 3,
         });
         let applied = apply_record(&record, &scene, &format::Limits::default())
             .expect("a small scene is within the limits");
@@ -489,7 +499,7 @@ mod corpus {
             (ChunkType::ENHANCER, "duplicate-genh"),
             (ChunkType::ORIGINAL_COLORS, "duplicate-gorc"),
         ] {
-            let mut p = chunks(&enhanced(&base, false));
+            let mut p = chunks(&enhanced(&base, false, false));
             let at = p.iter().position(|(t, _)| *t == ty).expect("stage-2 chunk");
             p.insert(at, p[at].clone());
             files.push((K::ChunkOrder, what, assemble(&p)));

@@ -458,11 +458,93 @@ fn genh_layout_2_reads_writes_and_refuses_as_specified() {
     ] {
         assert_eq!(kind, ErrorKind::InvalidValue, "{what}");
     }
-    assert_eq!(refused(&|b| b[0] = 3), ErrorKind::UnsupportedVersion);
+    assert_eq!(refused(&|b| b[0] = 4), ErrorKind::UnsupportedVersion);
+    // Byte 3 is 0 in layouts 1 and 2, and never 0 in layout 3.
+    assert_eq!(refused(&|b| b[3] = 1), ErrorKind::InvalidValue);
+    assert_eq!(refused(&|b| b[0] = 3), ErrorKind::InvalidValue);
     // A layout-2 chunk too short for its denoise record.
     assert_eq!(refused(&|b| b.truncate(75)), ErrorKind::BadChunkLength);
     // Layout 1 bytes read as layout 2 lose their first block to the record.
     let mut as_two = plain_bytes.clone();
     as_two[0] = 2;
     assert!(format::EnhancerRecord::parse(&as_two, &Limits::default()).is_err());
+}
+
+/// §7.2 layout 3: byte 3 says which records follow, the tone record sits after the
+/// denoise record (or at 68 alone) as the spec's example shows, and every field outside
+/// its range is refused where the chunk is read.
+#[test]
+fn genh_layout_3_reads_writes_and_refuses_as_specified() {
+    let (denoised, denoised_bytes) = corpus_enhancer("enhanced-denoised-sum-160.gsi");
+    let (record, bytes) = corpus_enhancer("enhanced-denoised-toned-sum-160.gsi");
+    assert_eq!((bytes[0], bytes[3]), (3, 3));
+    assert_eq!(bytes.len(), denoised_bytes.len() + 12);
+    assert_eq!(record.denoise, denoised.denoise);
+    let tone = format::Tone {
+        exponent: 0.7,
+        scale: 1.3,
+        passes: 3,
+    };
+    assert_eq!(record.tone, Some(tone));
+    assert_eq!(record.to_payload(19).unwrap(), bytes);
+    let (alone, alone_bytes) = corpus_enhancer("enhanced-toned-alpha-160.gsi");
+    assert_eq!((alone_bytes[0], alone_bytes[3]), (3, 2));
+    assert_eq!((alone.denoise, alone.tone), (None, Some(tone)));
+    assert_eq!(alone.to_payload(19).unwrap(), alone_bytes);
+
+    // The spec's example: a tone record alone, in place of the denoise record of a
+    // layout-2 chunk (the blocks stay where they are).
+    let example = spec_block("### 7.2.2 A tone curve", 1);
+    assert_eq!(example.len(), 12);
+    let mut b = denoised_bytes.clone();
+    b[0] = 3;
+    b[3] = 2;
+    b[68..80].copy_from_slice(&example);
+    let r = format::EnhancerRecord::parse(&b, &Limits::default()).unwrap();
+    assert_eq!(r.denoise, None);
+    assert_eq!(
+        r.tone,
+        Some(format::Tone {
+            exponent: 0.5,
+            scale: 0.8,
+            passes: 1
+        })
+    );
+    assert_eq!(r.to_payload(19).unwrap(), b);
+
+    let refused = |edit: &dyn Fn(&mut Vec<u8>)| {
+        let mut b = bytes.clone();
+        edit(&mut b);
+        format::EnhancerRecord::parse(&b, &Limits::default())
+            .expect_err("refused")
+            .kind()
+    };
+    let f32_at =
+        |o: usize, x: f32| move |b: &mut Vec<u8>| b[o..o + 4].copy_from_slice(&x.to_be_bytes());
+    // The tone record of `bytes` sits at 80, after the denoise record.
+    for (what, kind) in [
+        ("exponent 0", refused(&f32_at(80, 0.0))),
+        ("exponent −0.5", refused(&f32_at(80, -0.5))),
+        ("exponent NaN", refused(&f32_at(80, f32::NAN))),
+        ("exponent 4.5", refused(&f32_at(80, 4.5))),
+        ("scale 0", refused(&f32_at(84, 0.0))),
+        ("scale 65", refused(&f32_at(84, 65.0))),
+        ("scale ∞", refused(&f32_at(84, f32::INFINITY))),
+        ("0 passes", refused(&|b| b[88] = 0)),
+        ("9 passes", refused(&|b| b[88] = 9)),
+        ("reserved", refused(&|b| b[91] = 1)),
+        ("records 0", refused(&|b| b[3] = 0)),
+        ("denoise record only", refused(&|b| b[3] = 1)),
+        ("an unknown record", refused(&|b| b[3] = 7)),
+        // The denoise record is still checked in layout 3.
+        ("denoise passes 0", refused(&|b| b[76] = 0)),
+    ] {
+        assert_eq!(kind, ErrorKind::InvalidValue, "{what}");
+    }
+    // Too short for its records.
+    assert_eq!(refused(&|b| b.truncate(87)), ErrorKind::BadChunkLength);
+    // Read with one record fewer than written, the blocks start in the wrong place.
+    let mut as_one = bytes.clone();
+    as_one[3] = 2;
+    assert!(format::EnhancerRecord::parse(&as_one, &Limits::default()).is_err());
 }

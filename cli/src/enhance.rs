@@ -70,6 +70,11 @@ pub struct Args {
     /// spec §7.2.1), since brightening multiplies a dark image's sensor noise.
     #[arg(long)]
     no_denoise: bool,
+    /// Exponent of the tone curve after the mixture (format spec §7.2.2): below 1 lifts
+    /// shadows more than highlights, as a camera's curve does between a short exposure
+    /// and a longer one, at the same mean luma. 1 leaves the tones as the mixture made them.
+    #[arg(long, value_name = "G", default_value_t = 0.7, value_parser = tone_exponent)]
+    tone: f32,
     /// Seed of the fit's initialization.
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -146,6 +151,14 @@ fn parse_exposure(s: &str) -> Result<Exposure, String> {
     match s.parse::<f32>() {
         Ok(e) if e > 0.0 && e < 1.0 => Ok(Exposure::Exactly(e)),
         _ => Err(format!("{s}: a mean luma in (0, 1), or `auto`")),
+    }
+}
+
+fn tone_exponent(s: &str) -> Result<f32, String> {
+    let max = gsi::format::MAX_TONE_EXPONENT;
+    match s.parse::<f32>() {
+        Ok(g) if g > 0.0 && g <= max => Ok(g),
+        _ => Err(format!("{s}: an exponent in (0, {max}]")),
     }
 }
 
@@ -342,6 +355,10 @@ fn options(args: &Args) -> Result<EnhanceOptions, Failure> {
         } else {
             defaults.denoise
         },
+        tone: (args.tone != 1.0).then_some(gsi::enhance::tone::ToneOptions {
+            exponent: args.tone,
+            ..gsi::enhance::tone::ToneOptions::default()
+        }),
         params: gsi::enhance::loss::LossParams {
             exposure_target,
             ..defaults.params

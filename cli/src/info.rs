@@ -122,6 +122,9 @@ fn to_json(f: &GsiFile) -> serde_json::Value {
                 "denoise": e.denoise.map(|d| json!({
                     "range": d.range, "strength": d.strength, "passes": d.passes,
                 })),
+                "tone": e.tone.map(|t| json!({
+                    "exponent": t.exponent, "scale": t.scale, "passes": t.passes,
+                })),
                 "revertible": stage.revertible,
             }),
         },
@@ -184,7 +187,7 @@ fn to_text(f: &GsiFile) -> String {
     match &st.enhancer {
         Some(Ok(e)) => {
             s += &format!(
-                "enhanced: {}{} colour operators (hidden {}), {}x{} weight map, fitted in {} iterations to exposure {}; {}\n",
+                "enhanced: {}{} colour operators (hidden {}), {}x{} weight map, fitted in {} iterations to exposure {}{}; {}\n",
                 match e.denoise {
                     Some(d) => format!(
                         "denoised ({} passes, range {:.4}, strength {}), then ",
@@ -198,6 +201,13 @@ fn to_text(f: &GsiFile) -> String {
                 e.map_height,
                 e.fit.iterations,
                 e.fit.exposure,
+                match e.tone {
+                    Some(t) => format!(
+                        ", then a tone curve ({:.4}·x^{}, {} passes)",
+                        t.scale, t.exponent, t.passes
+                    ),
+                    None => String::new(),
+                },
                 if st.revertible {
                     "original colours kept (--revert restores them)"
                 } else {

@@ -149,9 +149,14 @@ fn apply_from_reproduces(blend: Blend) {
     let before = dark_file(3, 70, blend, 0.2);
     let after = enhanced(&before, true);
     let lim = Limits::default();
-    // The default enhancer denoises first (gENH layout 2), so this covers both steps.
+    // The default enhancer denoises first and tones last (gENH layout 3, both records),
+    // so this covers all three steps.
     let record = parse(&after).enhancer(&lim).unwrap().unwrap();
     assert!(record.denoise.is_some(), "{blend:?}: no denoising stored");
+    assert!(record.tone.is_some(), "{blend:?}: no tone curve stored");
+    let file = parse(&after);
+    let layout = payload(&file, ChunkType::ENHANCER).unwrap();
+    assert_eq!((layout[0], layout[3]), (3, 3), "layout 3, both records");
     // Applying the stored enhancer to the same original gives the same file.
     let again = enhance::apply_from(&parse(&before), &parse(&after), true, &lim).unwrap();
     assert_eq!(again, after);
@@ -171,7 +176,8 @@ fn apply_from_reproduces(blend: Blend) {
 }
 
 /// A scene whose footprints overlap past the neighbour search's share of the memory
-/// limit is still enhanced, without denoising (layout 1), and the caller is told why.
+/// limit is still enhanced, without denoising or tone curve (layout 1), and the caller
+/// is told why.
 #[test]
 fn too_much_overlap_for_denoising_is_enhanced_without_it() {
     let before = dark_file(5, 400, Blend::Sum, 0.2);
@@ -188,9 +194,9 @@ fn too_much_overlap_for_denoising_is_enhanced_without_it() {
         &mut |_| {},
     )
     .unwrap();
-    assert!(fitted.record.denoise.is_none());
+    assert!(fitted.record.denoise.is_none() && fitted.record.tone.is_none());
     let why = fitted.denoise_skipped.expect("the skip is reported");
-    assert!(why.contains("denoising"), "{why}");
+    assert!(why.contains("denoising or tone curve"), "{why}");
     assert_eq!(payload(&parse(&bytes), ChunkType::ENHANCER).unwrap()[0], 1);
     // With the default limits the same file is denoised.
     let (_, fitted) = enhance::enhance(
@@ -203,6 +209,7 @@ fn too_much_overlap_for_denoising_is_enhanced_without_it() {
     )
     .unwrap();
     assert!(fitted.record.denoise.is_some() && fitted.denoise_skipped.is_none());
+    assert!(fitted.record.tone.is_some());
 }
 
 #[test]
@@ -340,11 +347,16 @@ fn cli_in_place_revert_and_apply_from() {
     assert_eq!(json["enhancer"]["experts"], 16);
     assert_eq!(json["enhancer"]["revertible"], true);
     assert_eq!(json["enhancer"]["denoise"]["passes"], 2);
+    assert_eq!(json["enhancer"]["tone"]["passes"], 4);
+    let exponent = json["enhancer"]["tone"]["exponent"].as_f64().unwrap();
+    assert!((exponent - 0.7).abs() < 1e-6, "{exponent}");
     assert_eq!(json["file_bytes"].as_u64(), Some(after.len() as u64));
     let text = String::from_utf8(gsi(&["info", p]).stdout).unwrap();
     assert!(
         text.contains("enhanced: denoised (2 passes, range ")
-            && text.contains("then 16 colour operators"),
+            && text.contains("then 16 colour operators")
+            && text.contains("then a tone curve (")
+            && text.contains("·x^0.7, 4 passes)"),
         "{text}"
     );
 
@@ -467,6 +479,9 @@ fn cli_works_in_a_pipe_and_refuses_bad_usage() {
         vec!["enhance", p, "--in-place", "--revert", "--apply-from", p], // two modes
         vec!["enhance", p, "--in-place", "--exposure", "1.5"],           // not a mean luma
         vec!["enhance", p, "--in-place", "--exposure", "bright"],
+        vec!["enhance", p, "--in-place", "--tone", "0"], // not an exponent in (0, 4]
+        vec!["enhance", p, "--in-place", "--tone", "4.5"],
+        vec!["enhance", p, "--in-place", "--tone", "NaN"],
     ] {
         assert_eq!(gsi(&args).status.code(), Some(2), "{args:?}");
     }

@@ -1,7 +1,8 @@
 //! Any bytes as the payload of the stage-2 chunks `gENH` and `gORC`: `Ok` or `Err`, never
 //! a panic or more memory than the limits allow. An accepted enhancer must write back to
 //! the same record, and applying it must give finite colours within its clamp or the
-//! identity's range; its denoising (layout 2), finite colours.
+//! identity's range; its denoising (layouts 2 and 3) and its tone curve (layout 3),
+//! finite colours, the curve's within `±64`.
 
 #![no_main]
 
@@ -32,9 +33,10 @@ fuzz_target!(|data: &[u8]| {
         [64.0, -64.0, 0.0],
         [0.0; 3],
     ];
-    // Layout 2: the denoising (spec §7.2.1) over a small scene of odd shapes, a NaN
-    // centre and extreme colours included, stays finite in both blend modes.
-    if let Some(d) = &record.denoise {
+    // Layouts 2 and 3: the denoising (spec §7.2.1) and the tone curve (§7.2.2) over a
+    // small scene of odd shapes, a NaN centre and extreme colours included, stay finite
+    // in both blend modes.
+    if record.denoise.is_some() || record.tone.is_some() {
         for blend in [Blend::Sum, Blend::Alpha] {
             let scene = Scene {
                 width: 7,
@@ -53,9 +55,21 @@ fuzz_target!(|data: &[u8]| {
                     opacity: None,
                 },
             };
-            let out = gsi::enhance::denoise::denoise(&scene, &colors, d, &common::limits())
-                .expect("four Gaussians are within the limits");
-            assert!(out.iter().flatten().all(|x| x.is_finite()), "{out:?}");
+            if let Some(d) = &record.denoise {
+                let out = gsi::enhance::denoise::denoise(&scene, &colors, d, &common::limits())
+                    .expect("four Gaussians are within the limits");
+                assert!(out.iter().flatten().all(|x| x.is_finite()), "{out:?}");
+            }
+            if let Some(t) = &record.tone {
+                let out = gsi::enhance::tone::tone(&scene, &colors, t, &common::limits())
+                    .expect("four Gaussians are within the limits");
+                assert!(
+                    out.iter()
+                        .flatten()
+                        .all(|x| x.is_finite() && x.abs() <= 64.0),
+                    "{out:?}"
+                );
+            }
         }
     }
     for (out, c) in e.apply(&positions, &colors).iter().zip(colors) {

@@ -252,8 +252,9 @@ impl Neighbours {
     }
 
     /// The value of the render at every centre (`v`) and how many footprints overlap
-    /// there (`D ≥ 1`). In `alpha` blending, the records themselves and 1.
-    fn values(&self, colors: &[[f32; 3]]) -> (Vec<[f32; 3]>, Vec<f32>) {
+    /// there (`D ≥ 1`). In `alpha` blending, the records themselves and 1. Shared with
+    /// the tone curve (spec §7.2.2), which reaches its values through the same density.
+    pub fn values(&self, colors: &[[f32; 3]]) -> (Vec<[f32; 3]>, Vec<f32>) {
         if self.blend == Blend::Alpha {
             return (colors.to_vec(), vec![1.0; colors.len()]);
         }

@@ -46,6 +46,8 @@ pub struct EnhanceOptions {
     /// Denoising across neighbouring Gaussians before the mixture (`None`: off). Applied
     /// by [`super::enhance`], not by [`fit`], which fits the colours it is given.
     pub denoise: Option<super::denoise::DenoiseOptions>,
+    /// The tone curve after the mixture (`None`: off). Applied by [`super::enhance`] too.
+    pub tone: Option<super::tone::ToneOptions>,
     pub seed: u64,
 }
 
@@ -63,6 +65,7 @@ impl Default for EnhanceOptions {
             params: LossParams::default(),
             aim: Aim::default(),
             denoise: Some(super::denoise::DenoiseOptions::default()),
+            tone: Some(super::tone::ToneOptions::default()),
             seed: 0,
         }
     }
@@ -92,8 +95,8 @@ pub struct Fitted {
     pub mean_luma: (f32, f32),
     /// Why the fit left the GPU it was given for the CPU, if it did.
     pub fallback: Option<String>,
-    /// Why the colours were not denoised though the options asked for it, if they were
-    /// not (set by [`super::enhance`]).
+    /// Why the colours were neither denoised nor toned though the options asked for it,
+    /// if they were not (set by [`super::enhance`]).
     pub denoise_skipped: Option<String>,
 }
 

@@ -198,6 +198,7 @@ impl Enhancer {
             tensors,
             fit,
             denoise: None,
+            tone: None,
         }
     }
 

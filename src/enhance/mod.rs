@@ -9,11 +9,13 @@
 //!
 //! * [`mixture`]: the enhancer as stored and applied (no rendering needed).
 //! * [`denoise`]: the smoothing across neighbouring Gaussians that comes before it.
+//! * [`tone`]: the tone curve on the rendered values that comes after it.
 //! * `exposure`: metering the image, for the exposure to aim at and whether to act.
 //! * `features`, `loss`, `operator`, `fit`: fitting it (feature `encode`).
 
 pub mod denoise;
 pub mod mixture;
+pub mod tone;
 
 #[cfg(feature = "encode")]
 pub mod exposure;
@@ -74,24 +76,34 @@ pub fn apply_from(
 }
 
 /// The colours the stored enhancer `record` makes of `scene`'s (spec §7.2): its
-/// denoising first, where it has one, then the mixture. Fails only where the denoising
-/// would pass `limits`.
+/// denoising first, where it has one, then the mixture, then its tone curve, where it
+/// has one. Fails only where the footprint search of the denoising or the curve would
+/// pass `limits`.
 pub fn apply_record(
     record: &EnhancerRecord,
     scene: &Scene,
     limits: &Limits,
 ) -> Result<Vec<[f32; 3]>> {
     let g = &scene.gaussians;
-    let colors = match &record.denoise {
-        Some(d) => denoise::denoise(scene, &g.colors, d, limits)?,
-        None => g.colors.clone(),
+    let nb = match record.denoise.is_some() || record.tone.is_some() {
+        true => Some(denoise::Neighbours::new(scene, limits)?),
+        false => None,
     };
-    Ok(Enhancer::from_record(record).apply(&g.positions, &colors))
+    let colors = match (&record.denoise, &nb) {
+        (Some(d), Some(nb)) => nb.denoise(&g.colors, d),
+        _ => g.colors.clone(),
+    };
+    let colors = Enhancer::from_record(record).apply(&g.positions, &colors);
+    Ok(match (&record.tone, &nb) {
+        (Some(t), Some(nb)) => tone::apply(nb, &colors, t),
+        _ => colors,
+    })
 }
 
 /// Fit an enhancer to the file's (original) colours, with its mixture on `device`, and
 /// return the rewritten file with what the fit did. With `opts.denoise`, the colours are
-/// denoised first and the enhancer stores how. The caller decides beforehand whether
+/// denoised first, and with `opts.tone` the mixture's output goes through a tone curve;
+/// the enhancer stores both. The caller decides beforehand whether
 /// the image needs it ([`fit::scene_metering`], [`exposure::Metering::is_low_light`]).
 #[cfg(feature = "encode")]
 pub fn enhance(
@@ -106,25 +118,35 @@ pub fn enhance(
     let mut scene = base.to_scene();
     // Denoised first, so that the fit sees (and its losses measure) the cleaner image. A
     // scene whose footprints overlap too much for the neighbour search (within `limits`)
-    // is enhanced without it, and the caller is told.
+    // is enhanced without it and without the tone curve (which needs the same search),
+    // and the caller is told.
     let mut stored_denoise = None;
     let mut skipped = None;
-    if let Some(o) = &opts.denoise {
+    let mut nb = None;
+    if opts.denoise.is_some() || opts.tone.is_some() {
         match denoise::Neighbours::new(&scene, limits) {
-            Ok(nb) => {
-                stored_denoise = o.resolve(&nb, &scene.gaussians.colors);
-                if let Some(d) = &stored_denoise {
-                    scene.gaussians.colors = nb.denoise(&scene.gaussians.colors, d);
-                }
-            }
+            Ok(found) => nb = Some(found),
             Err(e) if e.kind() == crate::format::ErrorKind::LimitExceeded => {
-                skipped = Some(format!("enhanced without denoising: {e}"));
+                skipped = Some(format!("enhanced without denoising or tone curve: {e}"));
             }
             Err(e) => return Err(e),
         }
     }
+    if let (Some(o), Some(nb)) = (&opts.denoise, &nb) {
+        stored_denoise = o.resolve(nb, &scene.gaussians.colors);
+        if let Some(d) = &stored_denoise {
+            scene.gaussians.colors = nb.denoise(&scene.gaussians.colors, d);
+        }
+    }
     let mut fitted = fit::fit(&scene, opts, &features::FeatureBank, device, progress);
     fitted.record.denoise = stored_denoise;
+    // The curve last, on the mixture's output, keeping the mean luma the fit reached.
+    if let (Some(o), Some(nb)) = (&opts.tone, &nb) {
+        fitted.record.tone = o.resolve(nb, &scene, &fitted.colors, opts.work_side);
+        if let Some(t) = &fitted.record.tone {
+            fitted.colors = tone::apply(nb, &fitted.colors, t);
+        }
+    }
     fitted.denoise_skipped = skipped;
     let bytes = rewrite(file, &base, &fitted.colors, &fitted.record, keep_original)?;
     Ok((bytes, fitted))

@@ -16,6 +16,20 @@ pub const ENHANCER_VERSION: u8 = 1;
 /// between the fixed part and the blocks. Written only where there is one, so that an
 /// enhancer without it stays readable by every decoder of layout 1.
 pub const ENHANCER_VERSION_DENOISED: u8 = 2;
+/// `gENH` layout of an enhancer with a tone curve after the mixture: byte 3 says which of
+/// the [`Denoise`] and [`Tone`] records follow the fixed part (bit 0 and bit 1; bit 1 is
+/// always set, since without a tone record layouts 1 and 2 serve).
+pub const ENHANCER_VERSION_TONED: u8 = 3;
+/// Byte 3 of layout 3: a denoise record follows.
+pub const RECORD_DENOISE: u8 = 1;
+/// Byte 3 of layout 3: a tone record follows (after the denoise record, if any).
+pub const RECORD_TONE: u8 = 2;
+/// Bytes of the tone record of layout 3.
+pub const TONE_LEN: usize = 12;
+/// Most tone passes a `gENH` may ask for.
+pub const MAX_TONE_PASSES: u8 = 8;
+/// Largest tone exponent a `gENH` may hold.
+pub const MAX_TONE_EXPONENT: f32 = 4.0;
 /// Fixed part of a `gENH` payload of layout 1; seven length-prefixed attribute blocks
 /// follow (after the [`DENOISE_LEN`]-byte denoise record, in layout 2).
 pub const ENHANCER_FIXED_LEN: usize = 68;
@@ -63,6 +77,20 @@ pub struct Denoise {
     pub passes: u8,
 }
 
+/// The tone curve that runs after the mixture (spec §7.2.2): `a·x^g` per channel, on the
+/// values the render shows at the Gaussians' centres, reached in `passes` steps. What the
+/// numbers do is `crate::enhance::tone`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Tone {
+    /// Exponent `g` in `(0, MAX_TONE_EXPONENT]`: below 1 lifts shadows more than
+    /// highlights.
+    pub exponent: f32,
+    /// Scale `a` in `(0, 64]`.
+    pub scale: f32,
+    /// Passes, `1..=MAX_TONE_PASSES`.
+    pub passes: u8,
+}
+
 /// A `gENH` chunk: the mixture of colour operators and the weight map that mixes them.
 ///
 /// Every learned number is stored quantized (as an [`Attribute`] of one component, the
@@ -85,8 +113,10 @@ pub struct EnhancerRecord {
     /// of operators 1..K, operator-major within each tensor, row-major matrices.
     pub tensors: [Attribute; TENSORS],
     pub fit: FitSettings,
-    /// Smoothing applied to the colours before the mixture (layout 2), if any.
+    /// Smoothing applied to the colours before the mixture (layouts 2 and 3), if any.
     pub denoise: Option<Denoise>,
+    /// Tone curve applied after the mixture (layout 3), if any.
+    pub tone: Option<Tone>,
 }
 
 /// Number of values in each of the six tensors of one operator.
@@ -103,11 +133,15 @@ impl EnhancerRecord {
     /// The payload of a `gENH` chunk.
     pub fn to_payload(&self, zstd_level: i32) -> Result<Vec<u8>> {
         self.validate()?;
-        let version = match self.denoise {
-            None => ENHANCER_VERSION,
-            Some(_) => ENHANCER_VERSION_DENOISED,
+        let (version, records) = match (&self.denoise, &self.tone) {
+            (None, None) => (ENHANCER_VERSION, 0),
+            (Some(_), None) => (ENHANCER_VERSION_DENOISED, 0),
+            (d, Some(_)) => (
+                ENHANCER_VERSION_TONED,
+                RECORD_TONE | if d.is_some() { RECORD_DENOISE } else { 0 },
+            ),
         };
-        let mut out = vec![version, self.experts, self.hidden, 0];
+        let mut out = vec![version, self.experts, self.hidden, records];
         out.write_f32::<BigEndian>(self.clamp[0])?;
         out.write_f32::<BigEndian>(self.clamp[1])?;
         out.write_u16::<BigEndian>(self.map_width)?;
@@ -128,6 +162,11 @@ impl EnhancerRecord {
             out.write_f32::<BigEndian>(d.strength)?;
             out.extend_from_slice(&[d.passes, 0, 0, 0]);
         }
+        if let Some(t) = &self.tone {
+            out.write_f32::<BigEndian>(t.exponent)?;
+            out.write_f32::<BigEndian>(t.scale)?;
+            out.extend_from_slice(&[t.passes, 0, 0, 0]);
+        }
         for a in std::iter::once(&self.map).chain(&self.tensors) {
             let p = a.to_payload(zstd_level)?;
             out.write_u32::<BigEndian>(p.len() as u32)?;
@@ -143,6 +182,9 @@ impl EnhancerRecord {
         check_fit(&self.fit)?;
         if let Some(d) = &self.denoise {
             check_denoise(d)?;
+        }
+        if let Some(t) = &self.tone {
+            check_tone(t)?;
         }
         for (a, n) in std::iter::once(&self.map)
             .chain(&self.tensors)
@@ -169,19 +211,31 @@ impl EnhancerRecord {
                 ),
             ));
         }
-        let blocks_at = match p[0] {
-            ENHANCER_VERSION => ENHANCER_FIXED_LEN,
-            ENHANCER_VERSION_DENOISED => ENHANCER_FIXED_LEN + DENOISE_LEN,
-            v => {
+        // Which records follow the fixed part: (denoise, tone).
+        let (has_denoise, has_tone) = match (p[0], p[3]) {
+            (ENHANCER_VERSION, 0) => (false, false),
+            (ENHANCER_VERSION_DENOISED, 0) => (true, false),
+            (ENHANCER_VERSION_TONED, r)
+                if r & !(RECORD_DENOISE | RECORD_TONE) == 0 && r & RECORD_TONE != 0 =>
+            {
+                (r & RECORD_DENOISE != 0, true)
+            }
+            (ENHANCER_VERSION | ENHANCER_VERSION_DENOISED | ENHANCER_VERSION_TONED, r) => {
+                return Err(invalid(format!("gENH layout {}: byte 3 is {r:#04x}", p[0])))
+            }
+            (v, _) => {
                 return Err(Error::new(
                     ErrorKind::UnsupportedVersion,
                     format!(
-                        "gENH layout {v}, this decoder reads {ENHANCER_VERSION} and \
-                         {ENHANCER_VERSION_DENOISED}"
+                        "gENH layout {v}, this decoder reads {ENHANCER_VERSION} to \
+                         {ENHANCER_VERSION_TONED}"
                     ),
                 ))
             }
         };
+        let denoise_at = ENHANCER_FIXED_LEN;
+        let tone_at = denoise_at + if has_denoise { DENOISE_LEN } else { 0 };
+        let blocks_at = tone_at + if has_tone { TONE_LEN } else { 0 };
         if p.len() < blocks_at {
             return Err(Error::new(
                 ErrorKind::BadChunkLength,
@@ -208,8 +262,8 @@ impl EnhancerRecord {
         check_shape(experts, hidden, map_width, map_height)?;
         check_clamp(clamp)?;
         check_fit(&fit)?;
-        let denoise = if blocks_at > ENHANCER_FIXED_LEN {
-            let d = &p[ENHANCER_FIXED_LEN..blocks_at];
+        let denoise = if has_denoise {
+            let d = &p[denoise_at..denoise_at + DENOISE_LEN];
             if d[9..12] != [0, 0, 0] {
                 return Err(invalid("gENH denoise record: reserved bytes not 0"));
             }
@@ -220,6 +274,21 @@ impl EnhancerRecord {
             };
             check_denoise(&d)?;
             Some(d)
+        } else {
+            None
+        };
+        let tone = if has_tone {
+            let t = &p[tone_at..tone_at + TONE_LEN];
+            if t[9..12] != [0, 0, 0] {
+                return Err(invalid("gENH tone record: reserved bytes not 0"));
+            }
+            let t = Tone {
+                exponent: BigEndian::read_f32(&t[0..4]),
+                scale: BigEndian::read_f32(&t[4..8]),
+                passes: t[8],
+            };
+            check_tone(&t)?;
+            Some(t)
         } else {
             None
         };
@@ -274,6 +343,7 @@ impl EnhancerRecord {
             tensors,
             fit,
             denoise,
+            tone,
         })
     }
 }
@@ -338,6 +408,19 @@ fn check_denoise(d: &Denoise) -> Result<()> {
         return Err(invalid(format!(
             "gENH denoise: range {}, strength {}, {} passes",
             d.range, d.strength, d.passes
+        )));
+    }
+    Ok(())
+}
+
+/// Spec §7.2.2: an exponent in `(0, 4]`, a scale in `(0, 64]`, `1..=8` passes.
+fn check_tone(t: &Tone) -> Result<()> {
+    let exponent_ok = t.exponent > 0.0 && t.exponent <= MAX_TONE_EXPONENT;
+    let scale_ok = t.scale > 0.0 && t.scale <= crate::contract::COLOR_MAX;
+    if !(exponent_ok && scale_ok && (1..=MAX_TONE_PASSES).contains(&t.passes)) {
+        return Err(invalid(format!(
+            "gENH tone: exponent {}, scale {}, {} passes",
+            t.exponent, t.scale, t.passes
         )));
     }
     Ok(())

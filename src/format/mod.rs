@@ -20,8 +20,8 @@ mod writer;
 pub use chunk::{chunk_crc, ChunkInfo, ChunkType, RawChunk, SIGNATURE};
 pub use edit::ChunkedFile;
 pub use enhancer::{
-    tensor_sizes, Denoise, EnhancerRecord, FitSettings, OriginalColors, MAX_DENOISE_PASSES,
-    MAX_EXPERTS, MAX_HIDDEN, TENSORS,
+    tensor_sizes, Denoise, EnhancerRecord, FitSettings, OriginalColors, Tone, MAX_DENOISE_PASSES,
+    MAX_EXPERTS, MAX_HIDDEN, MAX_TONE_EXPONENT, MAX_TONE_PASSES, TENSORS,
 };
 pub use error::{Error, ErrorKind, Result};
 pub use header::{

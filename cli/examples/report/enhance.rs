@@ -41,6 +41,8 @@ struct Row {
     metered: [f64; 8],
     /// The figures with `--no-denoise`: the default without its denoising.
     plain: [f64; 8],
+    /// The figures with `--tone 1`: the default without its tone curve.
+    untoned: [f64; 8],
     /// Mean luma of the reference.
     reference_luma: f64,
     /// psnr, ssim, psnr_gm, ssim_gm, loe, de, eme, niqe
@@ -148,9 +150,14 @@ fn run_set(
             denoise: None,
             ..opts.clone()
         });
+        let (untoned_bytes, _) = variant(&EnhanceOptions {
+            tone: None,
+            ..opts.clone()
+        });
         let px = f64::from(w * h);
         let row = Row {
             plain: figures(&low, &high, &decode(&plain_bytes), w, h),
+            untoned: figures(&low, &high, &decode(&untoned_bytes), w, h),
             metered_target: metered_fit.record.fit.exposure,
             metered_luma: metered_fit.mean_luma.1,
             metered: figures(&low, &high, &decode(&metered_bytes), w, h),
@@ -197,7 +204,7 @@ fn rows_json(rows: &[Row]) -> serde_json::Value {
         "encode_s": r.encode_s, "enhance_s": r.enhance_s, "mean_luma": [r.luma.0, r.luma.1],
         "target": r.target, "reference_luma": r.reference_luma,
         "metered_target": r.metered_target, "metered_luma": r.metered_luma, "metered": r.metered,
-        "no_denoise": r.plain,
+        "no_denoise": r.plain, "no_tone": r.untoned,
         "psnr": r.gsi[0], "ssim": r.gsi[1], "psnr_gm": r.gsi[2], "ssim_gm": r.gsi[3],
         "loe": r.gsi[4], "de": r.gsi[5], "eme": r.gsi[6], "niqe": r.gsi[7],
         "auto_gamma": r.auto_gamma, "input": r.input, "paper_exposure_0_7": r.paper_exposure,
@@ -325,6 +332,12 @@ fn markdown(
                 d.range_spreads, d.strength, d.passes
             ),
             None => "no denoising".to_owned(),
+        } + &match opts.tone {
+            Some(t) => format!(
+                ", and a tone curve x^{} after the mixture at the same mean luma ({} passes)",
+                t.exponent, t.passes
+            ),
+            None => String::new(),
         }
     );
     let _ = writeln!(s, "{TABLE_HEAD}");
@@ -339,6 +352,12 @@ fn markdown(
         rows,
         "gsi `--no-denoise` (the default without its denoising)",
         |r| Some(&r.plain),
+    );
+    measured_row(
+        &mut s,
+        rows,
+        "gsi `--tone 1` (the default without its tone curve)",
+        |r| Some(&r.untoned),
     );
     measured_row(
         &mut s,
@@ -405,6 +424,7 @@ fn markdown(
             |r| Some(&r.gsi),
         );
         measured_row(&mut s, syn, "gsi `--no-denoise`", |r| Some(&r.plain));
+        measured_row(&mut s, syn, "gsi `--tone 1`", |r| Some(&r.untoned));
         measured_row(
             &mut s,
             syn,
