@@ -87,9 +87,11 @@ pub struct Fitted {
     pub record: EnhancerRecord,
     /// [`Enhancer::from_record`] of `record`: the one whose output was kept.
     pub enhancer: Enhancer,
-    /// The enhanced colour of every Gaussian.
+    /// The enhanced colour of every Gaussian (after the tone curve, where
+    /// [`super::enhance`] applied one).
     pub colors: Vec<[f32; 3]>,
-    /// Loss terms of the final colours.
+    /// Loss terms of the mixture's colours, before any tone curve (which keeps their
+    /// mean luma).
     pub terms: ImageTerms,
     /// Mean luma of the working image before and after.
     pub mean_luma: (f32, f32),

@@ -85,9 +85,11 @@ pub fn apply_record(
     limits: &Limits,
 ) -> Result<Vec<[f32; 3]>> {
     let g = &scene.gaussians;
-    let nb = match record.denoise.is_some() || record.tone.is_some() {
-        true => Some(denoise::Neighbours::new(scene, limits)?),
-        false => None,
+    // One footprint search serves both steps: it depends on the geometry only.
+    let nb = if record.denoise.is_some() || record.tone.is_some() {
+        Some(denoise::Neighbours::new(scene, limits)?)
+    } else {
+        None
     };
     let colors = match (&record.denoise, &nb) {
         (Some(d), Some(nb)) => nb.denoise(&g.colors, d),

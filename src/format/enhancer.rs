@@ -31,7 +31,8 @@ pub const MAX_TONE_PASSES: u8 = 8;
 /// Largest tone exponent a `gENH` may hold.
 pub const MAX_TONE_EXPONENT: f32 = 4.0;
 /// Fixed part of a `gENH` payload of layout 1; seven length-prefixed attribute blocks
-/// follow (after the [`DENOISE_LEN`]-byte denoise record, in layout 2).
+/// follow (after the [`DENOISE_LEN`]-byte denoise record in layout 2, and after the
+/// records byte 3 names in layout 3).
 pub const ENHANCER_FIXED_LEN: usize = 68;
 /// Bytes of the denoise record of layout 2.
 pub const DENOISE_LEN: usize = 12;
