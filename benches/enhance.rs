@@ -1,7 +1,8 @@
 //! One stage-2 enhancement iteration (mixture forward, `A·c`, zero-shot loss, backward,
 //! Adam) on a 600×400 scene of 4000 Gaussians, the size of a LOL image at about 1 bpp,
-//! applying a stored enhancer to every colour (`--apply-from`), and the denoising that
-//! comes before the mixture (neighbour search and two passes).
+//! applying a stored enhancer to every colour (`--apply-from`), the denoising that
+//! comes before the mixture (neighbour search and two passes), and the tone curve that
+//! comes after it (applied as stored, and its scale searched for as the encoder does).
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use gsi::enhance::features::FeatureBank;
@@ -46,6 +47,25 @@ fn enhance_iteration(c: &mut Criterion) {
             b.iter(|| {
                 black_box(gsi::enhance::denoise::denoise(
                     &scene, &g.colors, &denoise, &limits,
+                ))
+            })
+        });
+        let tone = gsi::format::Tone {
+            exponent: 0.7,
+            scale: 1.5,
+            passes: 4,
+        };
+        group.bench_function(format!("{}/tone/4k", blend.name()), |b| {
+            b.iter(|| black_box(gsi::enhance::tone::tone(&scene, &g.colors, &tone, &limits)))
+        });
+        let nb = gsi::enhance::denoise::Neighbours::new(&scene, &limits).expect("within limits");
+        group.bench_function(format!("{}/tone-resolve/4k", blend.name()), |b| {
+            b.iter(|| {
+                black_box(gsi::enhance::tone::ToneOptions::default().resolve(
+                    &nb,
+                    &scene,
+                    &g.colors,
+                    opts.work_side,
                 ))
             })
         });
