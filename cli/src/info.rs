@@ -190,8 +190,10 @@ fn to_text(f: &GsiFile) -> String {
                 "enhanced: {}{} colour operators (hidden {}), {}x{} weight map, fitted in {} iterations to exposure {}{}; {}\n",
                 match e.denoise {
                     Some(d) => format!(
-                        "denoised ({} passes, range {:.4}, strength {}), then ",
-                        d.passes, d.range, d.strength
+                        "denoised ({}, range {:.4}, strength {}), then ",
+                        passes(d.passes),
+                        d.range,
+                        d.strength
                     ),
                     None => String::new(),
                 },
@@ -203,8 +205,10 @@ fn to_text(f: &GsiFile) -> String {
                 e.fit.exposure,
                 match e.tone {
                     Some(t) => format!(
-                        ", then a tone curve ({:.4}·x^{}, {} passes)",
-                        t.scale, t.exponent, t.passes
+                        ", then a tone curve ({:.4}·x^{}, {})",
+                        t.scale,
+                        t.exponent,
+                        passes(t.passes)
                     ),
                     None => String::new(),
                 },
@@ -226,4 +230,9 @@ fn to_text(f: &GsiFile) -> String {
         );
     }
     s
+}
+
+/// "1 pass", "2 passes".
+fn passes(n: u8) -> String {
+    format!("{n} pass{}", if n == 1 { "" } else { "es" })
 }

@@ -346,14 +346,14 @@ fn cli_in_place_revert_and_apply_from() {
     let json: serde_json::Value = serde_json::from_slice(&info.stdout).unwrap();
     assert_eq!(json["enhancer"]["experts"], 16);
     assert_eq!(json["enhancer"]["revertible"], true);
-    assert_eq!(json["enhancer"]["denoise"]["passes"], 2);
+    assert_eq!(json["enhancer"]["denoise"]["passes"], 1);
     assert_eq!(json["enhancer"]["tone"]["passes"], 4);
     let exponent = json["enhancer"]["tone"]["exponent"].as_f64().unwrap();
     assert!((exponent - 0.7).abs() < 1e-6, "{exponent}");
     assert_eq!(json["file_bytes"].as_u64(), Some(after.len() as u64));
     let text = String::from_utf8(gsi(&["info", p]).stdout).unwrap();
     assert!(
-        text.contains("enhanced: denoised (2 passes, range ")
+        text.contains("enhanced: denoised (1 pass, range ")
             && text.contains("then 16 colour operators")
             && text.contains("then a tone curve (")
             && text.contains("·x^0.7, 4 passes)"),
