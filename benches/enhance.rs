@@ -2,11 +2,13 @@
 //! Adam) on a 600×400 scene of 4000 Gaussians, the size of a LOL image at about 1 bpp,
 //! applying a stored enhancer to every colour (`--apply-from`), the denoising that
 //! comes before the mixture (neighbour search and two passes), and the tone curve that
-//! comes after it (applied as stored, and its scale searched for as the encoder does).
+//! comes after it (applied as stored, and its scale searched for as the encoder does);
+//! and the zero-shot loss alone at the working size (`loss/256x171`).
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use gsi::enhance::features::FeatureBank;
 use gsi::enhance::fit::{EnhanceOptions, Session};
+use gsi::enhance::loss::{ImageLoss, LossParams, LossWeights};
 use gsi::model::Blend;
 use gsi::synth::{random_scene, SceneSpec};
 use std::hint::black_box;
@@ -73,6 +75,24 @@ fn enhance_iteration(c: &mut Criterion) {
             b.iter(|| black_box(Session::new(&scene, &opts, &FeatureBank)))
         });
     }
+    // The loss and its gradient at the working size of a 600×400 image, on a random
+    // image and a darker, noisier version of it as the low image.
+    let (w, h) = (256, 171);
+    // A 64-bit LCG's top 24 bits: uniform in [0, 1).
+    let mut state = 11u64;
+    let mut unit = move || {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (state >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let img: Vec<f32> = (0..w * h * 3).map(|_| 0.05 + 0.9 * unit()).collect();
+    let low: Vec<f32> = img.iter().map(|&v| 0.2 * v + 0.03 * unit()).collect();
+    let loss = ImageLoss::new(&low, w, h, LossWeights::default(), LossParams::default());
+    let mut grad = vec![0f32; img.len()];
+    group.bench_function("loss/256x171", |b| {
+        b.iter(|| black_box(loss.eval(&img, &mut grad)))
+    });
     group.finish();
 }
 

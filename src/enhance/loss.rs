@@ -1423,33 +1423,4 @@ mod tests {
         );
         loss.eval(&[0.0; 6], &mut [0.0; 3]);
     }
-
-    /// `cargo test --release -- --ignored --nocapture eval_timing`
-    #[test]
-    #[ignore = "timing, run in release with --nocapture"]
-    fn eval_timing_256x171() {
-        let (w, h) = (256, 171);
-        let mut rng = Rng::new(11);
-        let img: Vec<f32> = (0..w * h * 3).map(|_| rng.range(0.05, 0.95)).collect();
-        let low: Vec<f32> = img
-            .iter()
-            .map(|&v| 0.2 * v + rng.range(0.0, 0.03))
-            .collect();
-        let loss = ImageLoss::new(&low, w, h, LossWeights::default(), LossParams::default());
-        let mut grad = vec![0f32; img.len()];
-        let mut total = 0.0;
-        for _ in 0..20 {
-            total += loss.eval(&img, &mut grad).total;
-        }
-        // The fastest of several batches: the least disturbed by other processes.
-        let mut each = std::time::Duration::MAX;
-        for _ in 0..15 {
-            let start = std::time::Instant::now();
-            for _ in 0..20 {
-                total += loss.eval(&img, &mut grad).total;
-            }
-            each = each.min(start.elapsed() / 20);
-        }
-        println!("ImageLoss::eval at {w}×{h}: {each:?} per call (checksum {total})");
-    }
 }

@@ -1213,18 +1213,16 @@ pub(crate) mod tests {
         assert!(gpu.checked(|| Ok(gpu.zeroed(64))).is_ok());
     }
 
-    /// A device for a test, or `None` (and a note) where there is none, unless
-    /// `GSI_REQUIRE_GPU` is set, which makes that a failure, as in CI.
+    /// A device for a test, or `None` where there is none (the test then passes without
+    /// checking anything), unless `GSI_REQUIRE_GPU` is set, which makes that a failure:
+    /// CI sets it wherever lavapipe is installed, so a skip never goes unseen there.
     pub(crate) fn gpu() -> Option<super::Gpu> {
         match super::Gpu::new() {
             Ok(g) => Some(g),
             Err(e) if std::env::var_os("GSI_REQUIRE_GPU").is_some() => {
                 panic!("GSI_REQUIRE_GPU is set but {e}")
             }
-            Err(e) => {
-                eprintln!("skipped: {e}");
-                None
-            }
+            Err(_) => None,
         }
     }
 }
