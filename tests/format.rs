@@ -409,6 +409,20 @@ fn corpus_enhancer(name: &str) -> (format::EnhancerRecord, Vec<u8>) {
     (f.enhancer(&Limits::default()).unwrap().unwrap(), payload)
 }
 
+/// How `gENH` bytes with `edit` applied are refused (the edit must make them invalid).
+fn genh_refused(bytes: &[u8], edit: &dyn Fn(&mut Vec<u8>)) -> ErrorKind {
+    let mut b = bytes.to_vec();
+    edit(&mut b);
+    format::EnhancerRecord::parse(&b, &Limits::default())
+        .expect_err("refused")
+        .kind()
+}
+
+/// An edit that writes `x` as a big-endian f32 at offset `o`.
+fn f32_at(o: usize, x: f32) -> impl Fn(&mut Vec<u8>) {
+    move |b: &mut Vec<u8>| b[o..o + 4].copy_from_slice(&x.to_be_bytes())
+}
+
 /// §7.2 layout 2: the denoise record sits at offset 68 as the spec's example shows,
 /// layout 1 is still what an enhancer without denoising is written as, and every field
 /// outside its range is refused where the chunk is read.
@@ -437,15 +451,7 @@ fn genh_layout_2_reads_writes_and_refuses_as_specified() {
         })
     );
 
-    let refused = |edit: &dyn Fn(&mut Vec<u8>)| {
-        let mut b = bytes.clone();
-        edit(&mut b);
-        format::EnhancerRecord::parse(&b, &Limits::default())
-            .expect_err("refused")
-            .kind()
-    };
-    let f32_at =
-        |o: usize, x: f32| move |b: &mut Vec<u8>| b[o..o + 4].copy_from_slice(&x.to_be_bytes());
+    let refused = |edit: &dyn Fn(&mut Vec<u8>)| genh_refused(&bytes, edit);
     for (what, kind) in [
         ("range 0", refused(&f32_at(68, 0.0))),
         ("range NaN", refused(&f32_at(68, f32::NAN))),
@@ -512,15 +518,7 @@ fn genh_layout_3_reads_writes_and_refuses_as_specified() {
     );
     assert_eq!(r.to_payload(19).unwrap(), b);
 
-    let refused = |edit: &dyn Fn(&mut Vec<u8>)| {
-        let mut b = bytes.clone();
-        edit(&mut b);
-        format::EnhancerRecord::parse(&b, &Limits::default())
-            .expect_err("refused")
-            .kind()
-    };
-    let f32_at =
-        |o: usize, x: f32| move |b: &mut Vec<u8>| b[o..o + 4].copy_from_slice(&x.to_be_bytes());
+    let refused = |edit: &dyn Fn(&mut Vec<u8>)| genh_refused(&bytes, edit);
     // The tone record of `bytes` sits at 80, after the denoise record.
     for (what, kind) in [
         ("exponent 0", refused(&f32_at(80, 0.0))),

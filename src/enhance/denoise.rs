@@ -341,6 +341,23 @@ impl Neighbours {
     }
 }
 
+/// The neighbours of `scene` for a step (`what`, for the error) over `colors`, which
+/// must be one per Gaussian.
+pub(crate) fn neighbours_for(
+    scene: &Scene,
+    colors: &[[f32; 3]],
+    limits: &Limits,
+    what: &str,
+) -> Result<Neighbours> {
+    if colors.len() != scene.gaussians.len() {
+        return Err(Error::new(
+            ErrorKind::InvalidValue,
+            format!("{what}: not one colour per Gaussian"),
+        ));
+    }
+    Neighbours::new(scene, limits)
+}
+
 /// `colors` of `scene` denoised by `d` (spec §7.2.1).
 pub fn denoise(
     scene: &Scene,
@@ -348,13 +365,7 @@ pub fn denoise(
     d: &Denoise,
     limits: &Limits,
 ) -> Result<Vec<[f32; 3]>> {
-    if colors.len() != scene.gaussians.len() {
-        return Err(Error::new(
-            ErrorKind::InvalidValue,
-            "denoise: not one colour per Gaussian",
-        ));
-    }
-    Ok(Neighbours::new(scene, limits)?.denoise(colors, d))
+    Ok(neighbours_for(scene, colors, limits, "denoise")?.denoise(colors, d))
 }
 
 /// How stage 2 chooses the denoising it stores: the range as a multiple of the scene's

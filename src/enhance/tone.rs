@@ -18,7 +18,7 @@
 
 use super::denoise::Neighbours;
 use crate::contract::COLOR_MAX;
-use crate::format::{Error, ErrorKind, Limits, Result, Tone};
+use crate::format::{Limits, Result, Tone};
 use crate::model::Scene;
 
 /// Least value the curve is taken at (spec §7.2.2): below it `x^g` with `g < 1` would be
@@ -57,13 +57,8 @@ pub fn tone(
     t: &Tone,
     limits: &Limits,
 ) -> Result<Vec<[f32; 3]>> {
-    if colors.len() != scene.gaussians.len() {
-        return Err(Error::new(
-            ErrorKind::InvalidValue,
-            "tone: not one colour per Gaussian",
-        ));
-    }
-    Ok(apply(&Neighbours::new(scene, limits)?, colors, t))
+    let nb = super::denoise::neighbours_for(scene, colors, limits, "tone")?;
+    Ok(apply(&nb, colors, t))
 }
 
 /// How stage 2 chooses the curve it stores: the exponent and passes as they are, and the

@@ -159,14 +159,10 @@ impl EnhancerRecord {
         }
         debug_assert_eq!(out.len(), ENHANCER_FIXED_LEN);
         if let Some(d) = &self.denoise {
-            out.write_f32::<BigEndian>(d.range)?;
-            out.write_f32::<BigEndian>(d.strength)?;
-            out.extend_from_slice(&[d.passes, 0, 0, 0]);
+            write_record(&mut out, d.range, d.strength, d.passes);
         }
         if let Some(t) = &self.tone {
-            out.write_f32::<BigEndian>(t.exponent)?;
-            out.write_f32::<BigEndian>(t.scale)?;
-            out.extend_from_slice(&[t.passes, 0, 0, 0]);
+            write_record(&mut out, t.exponent, t.scale, t.passes);
         }
         for a in std::iter::once(&self.map).chain(&self.tensors) {
             let p = a.to_payload(zstd_level)?;
@@ -264,14 +260,11 @@ impl EnhancerRecord {
         check_clamp(clamp)?;
         check_fit(&fit)?;
         let denoise = if has_denoise {
-            let d = &p[denoise_at..denoise_at + DENOISE_LEN];
-            if d[9..12] != [0, 0, 0] {
-                return Err(invalid("gENH denoise record: reserved bytes not 0"));
-            }
+            let (range, strength, passes) = read_record(&p[denoise_at..tone_at], "denoise")?;
             let d = Denoise {
-                range: BigEndian::read_f32(&d[0..4]),
-                strength: BigEndian::read_f32(&d[4..8]),
-                passes: d[8],
+                range,
+                strength,
+                passes,
             };
             check_denoise(&d)?;
             Some(d)
@@ -279,14 +272,11 @@ impl EnhancerRecord {
             None
         };
         let tone = if has_tone {
-            let t = &p[tone_at..tone_at + TONE_LEN];
-            if t[9..12] != [0, 0, 0] {
-                return Err(invalid("gENH tone record: reserved bytes not 0"));
-            }
+            let (exponent, scale, passes) = read_record(&p[tone_at..blocks_at], "tone")?;
             let t = Tone {
-                exponent: BigEndian::read_f32(&t[0..4]),
-                scale: BigEndian::read_f32(&t[4..8]),
-                passes: t[8],
+                exponent,
+                scale,
+                passes,
             };
             check_tone(&t)?;
             Some(t)
@@ -347,6 +337,27 @@ impl EnhancerRecord {
             tone,
         })
     }
+}
+
+/// The shape the denoise and tone records share (spec §7.2): two f32, a pass count and
+/// three reserved zero bytes, 12 in all ([`DENOISE_LEN`], [`TONE_LEN`]).
+fn write_record(out: &mut Vec<u8>, a: f32, b: f32, passes: u8) {
+    out.extend_from_slice(&a.to_be_bytes());
+    out.extend_from_slice(&b.to_be_bytes());
+    out.extend_from_slice(&[passes, 0, 0, 0]);
+}
+
+/// [`write_record`]'s fields from a 12-byte record, its reserved bytes checked; `what`
+/// names it in the error.
+fn read_record(r: &[u8], what: &str) -> Result<(f32, f32, u8)> {
+    if r[9..12] != [0, 0, 0] {
+        return Err(invalid(format!("gENH {what} record: reserved bytes not 0")));
+    }
+    Ok((
+        BigEndian::read_f32(&r[0..4]),
+        BigEndian::read_f32(&r[4..8]),
+        r[8],
+    ))
 }
 
 fn counts(experts: u8, hidden: u8, map_width: u16, map_height: u16) -> [u64; 7] {
