@@ -381,3 +381,66 @@ fn a_coarse_start_is_refined_at_full_resolution() {
     );
     assert_eq!(plain_seen, coarse_seen);
 }
+
+/// A dark image is fitted at full scale and stored at its own level: the file renders
+/// the dark image (not the brightened copy the fit saw), says so in `gCRM`, and keeps
+/// more of it than a fit at its own level, most of all where brightening will show it.
+#[test]
+fn a_dark_image_is_fitted_at_full_scale_and_stored_as_it_is() {
+    let bright = scene_like(64, 48);
+    let dim = 0.08;
+    let mut t = bright.clone();
+    t.data.iter_mut().for_each(|v| *v *= dim);
+    for blend in [Blend::Sum, Blend::Alpha] {
+        let lifted = opts(Budget::Gaussians(60), 120, blend);
+        let as_is = EncodeOptions {
+            lift_dark: false,
+            ..lifted.clone()
+        };
+        let a = encode(&t, &lifted, gsi::Device::Cpu, &mut |_| {}).unwrap();
+        let b = encode(&t, &as_is, gsi::Device::Cpu, &mut |_| {}).unwrap();
+        let (img_a, img_b) = (decodes(&a.bytes, &t), decodes(&b.bytes, &t));
+        let psnr = |img: &gsi::render::RgbImage, gain: f32| {
+            let up = |d: &[f32]| d.iter().map(|v| v * gain).collect::<Vec<_>>();
+            gsi::fit::loss::psnr8(&up(&img.data), &up(&t.data), t.width, t.height)
+        };
+        // Stored as it is: the file's PSNR is against the dark image, and it is that of
+        // what a decoder shows.
+        assert!((a.psnr - psnr(&img_a, 1.0)).abs() < 1e-9);
+        assert!(
+            a.psnr > b.psnr - 0.1,
+            "{blend:?}: {:.2} dB lifted, {:.2} dB as is",
+            a.psnr,
+            b.psnr
+        );
+        let (up_a, up_b) = (psnr(&img_a, 1.0 / dim), psnr(&img_b, 1.0 / dim));
+        assert!(
+            up_a > up_b + 1.0,
+            "{blend:?}, brightened: {up_a:.2} dB lifted, {up_b:.2} dB as is"
+        );
+        let settings = |bytes: &[u8]| {
+            let meta = read_file(bytes, Limits::default()).unwrap().metadata;
+            meta.map(|m| m.settings).unwrap_or_default()
+        };
+        let want = format!("dark_gain={}", gsi::fit::dark::gain(&t));
+        assert!(
+            want.len() > 10 && settings(&a.bytes).contains(&want),
+            "{want}"
+        );
+        assert!(!settings(&b.bytes).contains("dark_gain"));
+    }
+    // A normally exposed image is fitted as it is: the same bytes either way.
+    let o = opts(Budget::Gaussians(40), 30, Blend::Sum);
+    let off = EncodeOptions {
+        lift_dark: false,
+        ..o.clone()
+    };
+    assert_eq!(
+        encode(&bright, &o, gsi::Device::Cpu, &mut |_| {})
+            .unwrap()
+            .bytes,
+        encode(&bright, &off, gsi::Device::Cpu, &mut |_| {})
+            .unwrap()
+            .bytes
+    );
+}

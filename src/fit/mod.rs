@@ -20,6 +20,7 @@
 //! where a step costs a fraction of a full one, and the full-resolution steps refine what
 //! it found ([`effort`] chooses how much of each).
 
+pub mod dark;
 pub mod effort;
 mod error;
 pub mod init;
@@ -90,6 +91,10 @@ pub struct EncodeOptions {
     /// Whether the stored colours are solved again for the quantized geometry, after the
     /// last step (off: the encoder before session 13, as the effort report's reference).
     pub solve_stored_colors: bool,
+    /// Fit a dark image brightened to full scale and store its colours divided by the
+    /// gain ([`dark`]), so that its shadows get Gaussians too. Images whose bright end
+    /// reaches half of full scale are fitted as they are either way.
+    pub lift_dark: bool,
 }
 
 /// Coarse-to-fine fitting: the first `fraction` of the iterations fit the image reduced
@@ -158,6 +163,7 @@ impl Default for EncodeOptions {
             densify: true,
             color_solve: 10,
             solve_stored_colors: true,
+            lift_dark: true,
         }
     }
 }
@@ -795,6 +801,10 @@ struct Runner<'o, 'p> {
     /// The full-resolution image's size.
     size: (u32, u32),
     stop_at: Option<f64>,
+    /// What the fit's PSNR gains from fitting a brightened copy of the image
+    /// ([`dark`]): `20·log10(gain)`, taken off the PSNR reported and compared with a
+    /// target, so that both speak of the image as it is.
+    psnr_offset: f64,
     start: std::time::Instant,
     on_progress: &'p mut dyn FnMut(&Progress),
     curve: Vec<Progress>,
@@ -875,13 +885,14 @@ impl Runner<'_, '_> {
             total: phase.all,
             gaussians: fitter.params.len(),
             loss: m.loss,
-            psnr: m.psnr,
+            psnr: m.psnr - self.psnr_offset,
             seconds: self.start.elapsed().as_secs_f64(),
             work: (work / phase.work_all.max(1e-9)).clamp(0.0, 1.0),
         };
         (self.on_progress)(&p);
         self.curve.push(p);
-        self.stop_at.is_some_and(|p| it > qat_from && m.psnr >= p)
+        self.stop_at
+            .is_some_and(|target| it > qat_from && p.psnr >= target)
     }
 }
 
@@ -958,6 +969,19 @@ pub fn encode(
     on_progress: &mut dyn FnMut(&Progress),
 ) -> Result<Encoded, Error> {
     check_target(target)?;
+    let truth = target;
+    let gain = if opts.lift_dark {
+        dark::gain(truth)
+    } else {
+        1.0
+    };
+    let brightened;
+    let target = if gain > 1.0 {
+        brightened = dark::brightened(truth, gain);
+        &brightened
+    } else {
+        truth
+    };
     let (w, h) = (target.width, target.height);
     let px = (w as f32) * (h as f32);
     let bits = opts.bits.unwrap_or_else(|| default_bits(w, h, opts.blend));
@@ -981,6 +1005,7 @@ pub fn encode(
             Budget::TargetPsnr(p) => Some(f64::from(p)),
             _ => None,
         },
+        psnr_offset: 20.0 * f64::from(gain).log10(),
         start: std::time::Instant::now(),
         on_progress,
         curve: Vec::new(),
@@ -1062,7 +1087,7 @@ pub fn encode(
     let fine_steps = opts.iterations - coarse.as_ref().map_or(0, |c| c.1);
     // The passes below shrink to the budget; refilling it there would undo them.
     runner.fill = None;
-    let mut result = finish(&mut fitter, bits, opts)?;
+    let mut result = finish(&mut fitter, bits, opts, truth, gain)?;
     // Budgets: shrink to the byte budget, or grow to the quality target.
     for _ in 0..4 {
         match opts.budget {
@@ -1085,7 +1110,7 @@ pub fn encode(
             Budget::Gaussians(_) => break,
         }
         runner.run(&mut fitter, Phase::whole((fine_steps / 3).max(1), true));
-        result = finish(&mut fitter, bits, opts)?;
+        result = finish(&mut fitter, bits, opts, truth, gain)?;
     }
     // A budget the passes above missed is met by pruning alone; one that even a single
     // Gaussian exceeds is refused, not written over budget.
@@ -1103,7 +1128,7 @@ pub fn encode(
         }
         let n = shrunk(n_now, bpp, b, px).clamp(1, n_now - 1);
         fitter.prune_and_grow(0.0, n, 0);
-        result = finish(&mut fitter, bits, opts)?;
+        result = finish(&mut fitter, bits, opts, truth, gain)?;
     }
     result.curve = runner.curve;
     result.fallback = fitter.fallback.take();
@@ -1111,14 +1136,24 @@ pub fn encode(
 }
 
 /// Quantize, drop what the 8-bit render cannot show, write, and measure the stored PSNR.
-fn finish(fitter: &mut Fitter, bits: BitDepths, opts: &EncodeOptions) -> Result<Encoded, Error> {
+fn finish(
+    fitter: &mut Fitter,
+    bits: BitDepths,
+    opts: &EncodeOptions,
+    t: &Target,
+    gain: f32,
+) -> Result<Encoded, Error> {
     fitter.canonicalize_rotations();
-    let t = fitter.target;
     let mut scene = fitter.scene();
     // A Gaussian whose whole contribution is under one 8-bit step changes nothing visible.
     let (score, _) = fitter.contributions();
     let keep: Vec<bool> = score.iter().map(|&s| s >= 1.0 / 255.0).collect();
     optim::retain(&mut scene.gaussians, &keep);
+    if gain > 1.0 {
+        for c in &mut scene.gaussians.colors {
+            *c = c.map(|v| v / gain);
+        }
+    }
     let float = crate::render::render(&scene, t.width, t.height)?;
     let float_psnr = loss::psnr8(&float.data, &t.data, t.width, t.height);
     let mut records = Records::from_scene(&scene, bits);
@@ -1165,6 +1200,9 @@ fn finish(fitter: &mut Fitter, bits: BitDepths, opts: &EncodeOptions) -> Result<
     }
     if !opts.solve_stored_colors {
         settings += "\nsolve_stored_colors=false";
+    }
+    if gain > 1.0 {
+        settings += &format!("\ndark_gain={gain}");
     }
     let bytes = format::to_bytes(
         &records,

@@ -43,6 +43,13 @@ struct Row {
     plain: [f64; 8],
     /// The figures with `--tone 1`: the default without its tone curve.
     untoned: [f64; 8],
+    /// The figures of the default enhancement of a stage-1 file fitted at the image's own
+    /// level (`EncodeOptions::lift_dark` off, as before session 17).
+    unlifted: [f64; 8],
+    /// PSNR of the stage-1 file against the low image, as stored, and with
+    /// `lift_dark` off.
+    stage1_psnr: f64,
+    unlifted_stage1_psnr: f64,
     /// Mean luma of the reference.
     reference_luma: f64,
     /// psnr, ssim, psnr_gm, ssim_gm, loe, de, eme, niqe
@@ -92,6 +99,12 @@ fn run_set(
         };
         let e = encode(&target, &enc_opts, gsi::Device::Cpu, &mut |_| {}).expect("encode");
         let encode_s = t0.elapsed().as_secs_f64();
+        let unlifted_opts = EncodeOptions {
+            lift_dark: false,
+            ..enc_opts.clone()
+        };
+        let unlifted =
+            encode(&target, &unlifted_opts, gsi::Device::Cpu, &mut |_| {}).expect("encode");
         let file = ChunkedFile::parse(&e.bytes, Limits::default()).expect("own file parses");
         let t0 = Instant::now();
         let (kept, fitted) = gsi::enhance::enhance(
@@ -154,10 +167,22 @@ fn run_set(
             tone: None,
             ..opts.clone()
         });
+        let (unlifted_bytes, _) = gsi::enhance::enhance(
+            &ChunkedFile::parse(&unlifted.bytes, Limits::default()).expect("own file parses"),
+            opts,
+            false,
+            &Limits::default(),
+            gsi::Device::Cpu,
+            &mut |_| {},
+        )
+        .expect("enhance");
         let px = f64::from(w * h);
         let row = Row {
             plain: figures(&low, &high, &decode(&plain_bytes), w, h),
             untoned: figures(&low, &high, &decode(&untoned_bytes), w, h),
+            unlifted: figures(&low, &high, &decode(&unlifted_bytes), w, h),
+            stage1_psnr: e.psnr,
+            unlifted_stage1_psnr: unlifted.psnr,
             metered_target: metered_fit.record.fit.exposure,
             metered_luma: metered_fit.mean_luma.1,
             metered: figures(&low, &high, &decode(&metered_bytes), w, h),
@@ -204,7 +229,8 @@ fn rows_json(rows: &[Row]) -> serde_json::Value {
         "encode_s": r.encode_s, "enhance_s": r.enhance_s, "mean_luma": [r.luma.0, r.luma.1],
         "target": r.target, "reference_luma": r.reference_luma,
         "metered_target": r.metered_target, "metered_luma": r.metered_luma, "metered": r.metered,
-        "no_denoise": r.plain, "no_tone": r.untoned,
+        "no_denoise": r.plain, "no_tone": r.untoned, "stage1_not_lifted": r.unlifted,
+        "stage1_psnr": r.stage1_psnr, "stage1_psnr_not_lifted": r.unlifted_stage1_psnr,
         "psnr": r.gsi[0], "ssim": r.gsi[1], "psnr_gm": r.gsi[2], "ssim_gm": r.gsi[3],
         "loe": r.gsi[4], "de": r.gsi[5], "eme": r.gsi[6], "niqe": r.gsi[7],
         "auto_gamma": r.auto_gamma, "input": r.input, "paper_exposure_0_7": r.paper_exposure,
@@ -291,6 +317,21 @@ fn landing(rows: &[Row]) -> String {
     )
 }
 
+/// Stage 1's fidelity to the low image, with and without fitting it at full scale.
+fn stage1_fidelity(rows: &[Row]) -> String {
+    let better = rows
+        .iter()
+        .filter(|r| r.stage1_psnr > r.unlifted_stage1_psnr)
+        .count();
+    format!(
+        "Stage 1's file against the low image: mean PSNR {:.2} dB, {:.2} dB with `lift_dark` off (higher on {better} \
+         of {} images).",
+        mean(rows.iter().map(|r| r.stage1_psnr)),
+        mean(rows.iter().map(|r| r.unlifted_stage1_psnr)),
+        rows.len()
+    )
+}
+
 fn per_image(s: &mut String, rows: &[Row]) {
     let _ = writeln!(
         s,
@@ -320,7 +361,7 @@ fn markdown(
         s,
         "## Stage 2: low-light enhancement in the container (LOL eval15)\n\n\
          Machine: {}. Commit: `{}`. Produced by `cargo run --release --example report -- --enhance-only`.\n\n\
-         Each of the {} low-light images is encoded at {BPP} bpp (stage 1, default settings), enhanced with \
+         Each of the {} low-light images is encoded at {BPP} bpp (stage 1, default settings: a dark image is fitted brightened to full scale, `gsi::fit::dark`), enhanced with \
          `gsi enhance` defaults ({} iterations, K = {}, hidden {}, working size {} px, exposure target {}, \
          the paper's loss weights, {}), decoded at 600×400 and scored against `high` with `gsi::metrics` \
          (the conventions of `../shared/data/README.md`; LOE against the low input). \
@@ -362,6 +403,12 @@ fn markdown(
     measured_row(
         &mut s,
         rows,
+        "gsi, stage 1 fitted at the image's own level (`lift_dark` off)",
+        |r| Some(&r.unlifted),
+    );
+    measured_row(
+        &mut s,
+        rows,
         "gsi `--exposure auto` (metered, reached)",
         |r| Some(&r.metered),
     );
@@ -381,8 +428,9 @@ fn markdown(
     let _ = writeln!(
         s,
         "\nNIQE (lower is better) is `gsi::metrics::niqe` with LIVE's pristine model (`data/niqe`); the README \
-         measured none, so its rows have no NIQE.\n\n{}",
-        landing(rows)
+         measured none, so its rows have no NIQE.\n\n{}\n\n{}",
+        landing(rows),
+        stage1_fidelity(rows)
     );
     let med = |f: fn(&Row) -> f64| median(rows.iter().map(f).collect());
     let _ = writeln!(
@@ -428,6 +476,12 @@ fn markdown(
         measured_row(
             &mut s,
             syn,
+            "gsi, stage 1 fitted at the image's own level (`lift_dark` off)",
+            |r| Some(&r.unlifted),
+        );
+        measured_row(
+            &mut s,
+            syn,
             "gsi `--exposure auto` (metered, reached)",
             |r| Some(&r.metered),
         );
@@ -436,8 +490,9 @@ fn markdown(
         let meds = |f: fn(&Row) -> f64| median(syn.iter().map(f).collect());
         let _ = writeln!(
             s,
-            "\n{} Enhance time (median) {:.1} s for 768×512 images.\n",
+            "\n{} {} Enhance time (median) {:.1} s for 768×512 images.\n",
             landing(syn),
+            stage1_fidelity(syn),
             meds(|r| r.enhance_s)
         );
         per_image(&mut s, syn);
