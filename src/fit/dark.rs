@@ -44,21 +44,25 @@ pub const MAX_GAIN: f32 = 16.0;
 /// scale, else the gain that brings it to full scale, at most [`MAX_GAIN`]. Values that
 /// are negative or not finite count as 0.
 pub fn gain(target: &Target) -> f32 {
-    let mut v: Vec<f32> = target
-        .data
-        .iter()
-        .map(|x| if x.is_finite() { x.max(0.0) } else { 0.0 })
-        .collect();
-    if v.is_empty() {
+    let value = |x: &f32| if x.is_finite() { x.max(0.0) } else { 0.0 };
+    let n = target.data.len();
+    if n == 0 {
         return 1.0;
     }
-    let rank = ((v.len() - 1) as f64 * HIGH_QUANTILE).round() as usize;
-    let (_, &mut high, _) = v.select_nth_unstable_by(rank, f32::total_cmp);
-    if high * MIN_GAIN >= 1.0 {
-        1.0
-    } else {
-        (1.0 / high).min(MAX_GAIN)
+    let rank = ((n - 1) as f64 * HIGH_QUANTILE).round() as usize;
+    // The bright end reaches 1/MIN_GAIN exactly when at most `rank` values lie below it:
+    // a count, with no copy, settles every normally exposed image.
+    let below = target
+        .data
+        .iter()
+        .filter(|x| value(x) * MIN_GAIN < 1.0)
+        .count();
+    if below <= rank {
+        return 1.0;
     }
+    let mut v: Vec<f32> = target.data.iter().map(value).collect();
+    let (_, &mut high, _) = v.select_nth_unstable_by(rank, f32::total_cmp);
+    (1.0 / high).min(MAX_GAIN)
 }
 
 /// `target` with every value multiplied by `k`.

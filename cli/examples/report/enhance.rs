@@ -134,9 +134,9 @@ fn run_set(
         };
         let out = decode(&kept);
         // The variants beside the default: the same file, other options, gORC dropped.
-        let variant = |o: &EnhanceOptions| {
+        let enhance_quietly = |f: &ChunkedFile, o: &EnhanceOptions| {
             gsi::enhance::enhance(
-                &file,
+                f,
                 o,
                 false,
                 &Limits::default(),
@@ -145,6 +145,7 @@ fn run_set(
             )
             .expect("enhance")
         };
+        let variant = |o: &EnhanceOptions| enhance_quietly(&file, o);
         let paper_exposure = paper.then(|| {
             let (bytes, _) = variant(&EnhanceOptions {
                 params: gsi::enhance::loss::LossParams {
@@ -167,15 +168,9 @@ fn run_set(
             tone: None,
             ..opts.clone()
         });
-        let (unlifted_bytes, _) = gsi::enhance::enhance(
-            &ChunkedFile::parse(&unlifted.bytes, Limits::default()).expect("own file parses"),
-            opts,
-            false,
-            &Limits::default(),
-            gsi::Device::Cpu,
-            &mut |_| {},
-        )
-        .expect("enhance");
+        let unlifted_file =
+            ChunkedFile::parse(&unlifted.bytes, Limits::default()).expect("own file parses");
+        let (unlifted_bytes, _) = enhance_quietly(&unlifted_file, opts);
         let px = f64::from(w * h);
         let row = Row {
             plain: figures(&low, &high, &decode(&plain_bytes), w, h),
