@@ -1,9 +1,10 @@
 //! One stage-2 enhancement iteration (mixture forward, `A·c`, zero-shot loss, backward,
 //! Adam) on a 600×400 scene of 4000 Gaussians, the size of a LOL image at about 1 bpp,
 //! applying a stored enhancer to every colour (`--apply-from`), the denoising that
-//! comes before the mixture (neighbour search and two passes), and the tone curve that
-//! comes after it (applied as stored, and its scale searched for as the encoder does);
-//! and the zero-shot loss alone at the working size (`loss/256x171`).
+//! comes before the mixture (neighbour search and two passes), the per-Gaussian tone
+//! curve of older files (applied as stored), stage 2's low-light decision (`assess`) and
+//! its choice of tone curve and gain map (`curve-plan`); and the zero-shot loss alone at
+//! the working size (`loss/256x171`).
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use gsi::enhance::features::FeatureBank;
@@ -60,13 +61,18 @@ fn enhance_iteration(c: &mut Criterion) {
         group.bench_function(format!("{}/tone/4k", blend.name()), |b| {
             b.iter(|| black_box(gsi::enhance::tone::tone(&scene, &g.colors, &tone, &limits)))
         });
-        let nb = gsi::enhance::denoise::Neighbours::new(&scene, &limits).expect("within limits");
-        group.bench_function(format!("{}/tone-resolve/4k", blend.name()), |b| {
+        group.bench_function(format!("{}/assess/4k", blend.name()), |b| {
+            b.iter(|| black_box(gsi::enhance::assess::assess(&scene, opts.work_side)))
+        });
+        let curve = gsi::enhance::curve::CurveOptions::default();
+        let target = gsi::enhance::curve::MID_GREY;
+        group.bench_function(format!("{}/curve-plan/4k", blend.name()), |b| {
             b.iter(|| {
-                black_box(gsi::enhance::tone::ToneOptions::default().resolve(
-                    &nb,
+                black_box(gsi::enhance::curve::plan(
                     &scene,
                     &g.colors,
+                    target,
+                    &curve,
                     opts.work_side,
                 ))
             })

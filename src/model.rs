@@ -134,6 +134,106 @@ pub struct Scene {
     pub blend: Blend,
     pub cov_param: CovParam,
     pub gaussians: GaussianSet,
+    /// The tone curve every blended value goes through before it is shown (spec §6.6,
+    /// `GTRC`); `None` shows the blended values as they are.
+    pub tone: Option<ToneCurve>,
+}
+
+/// Most knots a [`ToneCurve`] may have (spec §6.6).
+pub const TONE_KNOTS_MAX: usize = 1024;
+
+/// A curve applied to every blended channel value (spec §6.6): knots evenly spaced in the
+/// square root of the value, as 16-bit fractions of 1, linearly interpolated.
+///
+/// Stage 2 stores its tone curve this way because a curve of the blended value cannot be
+/// moved into the colour records: a power of a sum of Gaussians is not a sum of the same
+/// Gaussians. Evaluating it takes `sqrt`, `+`, `−`, `×` and `÷` only, so every decoder
+/// gets the same bits.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ToneCurve {
+    /// 1 (one curve for R, G and B) or 3 (one per channel).
+    curves: u8,
+    /// Knots per curve, `2..=TONE_KNOTS_MAX`.
+    knots: u16,
+    /// `curves · knots` values, curve after curve; knot `i` is the curve at `(i/(n−1))²`.
+    values: Vec<u16>,
+}
+
+impl ToneCurve {
+    /// A curve from its knot values (`curves` of `values.len() / curves` knots each);
+    /// `None` where the counts break spec §6.6.
+    pub fn new(curves: u8, values: Vec<u16>) -> Option<ToneCurve> {
+        if curves != 1 && curves != 3 || values.len() % usize::from(curves) != 0 {
+            return None;
+        }
+        let knots = values.len() / usize::from(curves);
+        if !(2..=TONE_KNOTS_MAX).contains(&knots) {
+            return None;
+        }
+        Some(ToneCurve {
+            curves,
+            knots: knots as u16,
+            values,
+        })
+    }
+
+    /// One curve for all three channels, sampling `f` (a function of the blended value,
+    /// with results in `[0, 1]`) at `knots` knots, each rounded to the nearest 16-bit
+    /// step. `None` where `knots` is out of range.
+    pub fn sample(knots: usize, f: impl Fn(f64) -> f64) -> Option<ToneCurve> {
+        if !(2..=TONE_KNOTS_MAX).contains(&knots) {
+            return None;
+        }
+        let last = (knots - 1) as f64;
+        let values = (0..knots)
+            .map(|i| {
+                let s = i as f64 / last;
+                let y = f(s * s);
+                let y = if y.is_nan() { 0.0 } else { y.clamp(0.0, 1.0) };
+                (y * 65535.0).round() as u16
+            })
+            .collect();
+        ToneCurve::new(1, values)
+    }
+
+    /// 1 or 3.
+    pub fn curves(&self) -> u8 {
+        self.curves
+    }
+
+    /// Knots per curve.
+    pub fn knots(&self) -> u16 {
+        self.knots
+    }
+
+    /// Every knot value, curve after curve.
+    pub fn values(&self) -> &[u16] {
+        &self.values
+    }
+
+    /// The curve of `channel` (0, 1, 2) at the blended value `c`, exactly as spec §6.6.
+    #[inline]
+    pub fn eval(&self, channel: usize, c: f32) -> f32 {
+        let n = usize::from(self.knots);
+        let curve = if self.curves == 1 { 0 } else { channel };
+        let l = &self.values[curve * n..][..n];
+        // NaN fails the comparison and is shown as 0.
+        let x = if c >= 0.0 { c.min(1.0) } else { 0.0 };
+        let u = x.sqrt() * (n - 1) as f32;
+        let i = (u as usize).min(n - 2);
+        let t = u - i as f32;
+        let (a, b) = (f32::from(l[i]), f32::from(l[i + 1]));
+        (a + t * (b - a)) / 65535.0
+    }
+
+    /// Apply the curve to interleaved RGB values in place.
+    pub fn apply(&self, rgb: &mut [f32]) {
+        for px in rgb.chunks_exact_mut(3) {
+            for (k, v) in px.iter_mut().enumerate() {
+                *v = self.eval(k, *v);
+            }
+        }
+    }
 }
 
 #[cfg(test)]

@@ -67,6 +67,7 @@ pub fn random_scene(seed: u64, spec: SceneSpec) -> Scene {
         g.opacity = Some((0..spec.count).map(|_| rng.range(0.05, 1.0)).collect());
     }
     Scene {
+        tone: None,
         width: spec.width,
         height: spec.height,
         blend: spec.blend,
@@ -272,14 +273,17 @@ mod corpus {
         });
         // Stage 2: a file enhanced in the container (gENH and gORC before GEND); the
         // `denoised` ones with a layout-2 gENH (spec §7.2.1), the `toned` ones with a
-        // layout-3 gENH (§7.2.2), with both records and with the tone record alone.
-        for (name, blend, denoised, toned) in [
-            ("enhanced-sum-160", Sum, false, false),
-            ("enhanced-alpha-160", Alpha, false, false),
-            ("enhanced-denoised-sum-160", Sum, true, false),
-            ("enhanced-denoised-alpha-160", Alpha, true, false),
-            ("enhanced-denoised-toned-sum-160", Sum, true, true),
-            ("enhanced-toned-alpha-160", Alpha, false, true),
+        // layout-3 gENH (§7.2.2), with both records and with the tone record alone; the
+        // `gained` ones with a layout-4 gENH (a gain map, §7.2.3) and a GTRC (§6.6).
+        for (name, blend, denoised, toned, gained) in [
+            ("enhanced-sum-160", Sum, false, false, false),
+            ("enhanced-alpha-160", Alpha, false, false, false),
+            ("enhanced-denoised-sum-160", Sum, true, false, false),
+            ("enhanced-denoised-alpha-160", Alpha, true, false, false),
+            ("enhanced-denoised-toned-sum-160", Sum, true, true, false),
+            ("enhanced-toned-alpha-160", Alpha, false, true, false),
+            ("enhanced-denoised-gained-sum-160", Sum, true, false, true),
+            ("enhanced-gained-alpha-160", Alpha, false, false, true),
         ] {
             let mut scene = random_scene(13, spec(64, 40, 160, blend, Lsr, blend == Alpha));
             for c in &mut scene.gaussians.colors {
@@ -294,18 +298,37 @@ mod corpus {
                     ),
                     denoised,
                     toned,
+                    gained,
                 ),
                 expect: None,
             });
         }
+        // A tone curve per channel (GTRC with three curves) on a plain stage-1 file.
+        let mut records = random(14, SceneSpec::new(40, 30, 100, Blend::Sum));
+        records.tone = Some(three_curves());
+        out.push(valid_file("tone-curve-3-curves-sum-100", &records));
         out
+    }
+
+    /// A curve per channel: powers 0.5, 0.6 and 0.7, scaled by 1.2 and capped at 0.97.
+    pub(super) fn three_curves() -> crate::model::ToneCurve {
+        let values = [0.5f64, 0.6, 0.7]
+            .iter()
+            .flat_map(|&g| {
+                let c = crate::model::ToneCurve::sample(33, |x| (1.2 * x.powf(g)).min(0.97))
+                    .expect("33 knots");
+                c.values().to_vec()
+            })
+            .collect();
+        crate::model::ToneCurve::new(3, values).expect("three curves of 33 knots")
     }
 
     /// `bytes` rewritten by a fixed pseudo-random enhancer (K = 4, hidden 3, a 3×2 map),
     /// as `gsi enhance` would store one; with `denoised`, one that smooths the colours
     /// first (two passes, range 0.05); with `toned`, one that ends with a tone curve
-    /// (`1.3·x^0.7`, three passes).
-    pub(super) fn enhanced(bytes: &[u8], denoised: bool, toned: bool) -> Vec<u8> {
+    /// (`1.3·x^0.7`, three passes); with `gained`, one with a 4×3 gain map (1 to 6) after
+    /// the mixture, shown through a `GTRC` curve (`min(1.8·sqrt(x), 0.97)`, 64 knots).
+    pub(super) fn enhanced(bytes: &[u8], denoised: bool, toned: bool, gained: bool) -> Vec<u8> {
         use crate::enhance::{apply_record, colors_like, mixture::clamp_for, Enhancer};
         let file = format::ChunkedFile::parse(bytes, format::Limits::default()).expect("own file");
         let scene = file.file.records.to_scene();
@@ -339,10 +362,21 @@ mod corpus {
             scale: 1.3,
             passes: 3,
         });
+        record.gain = gained.then(|| {
+            let gains: Vec<[f32; 1]> = (0..12).map(|_| [rng.range(1.0, 6.0)]).collect();
+            format::GainMap {
+                width: 4,
+                height: 3,
+                gains: format::Attribute::fit(&gains, [8]),
+            }
+        });
+        let curve = gained.then(|| {
+            crate::model::ToneCurve::sample(64, |x| (1.8 * x.sqrt()).min(0.97)).expect("64 knots")
+        });
         let applied = apply_record(&record, &scene, &format::Limits::default())
             .expect("a small scene is within the limits");
         let colors = colors_like(&applied, &file.file.records.colors);
-        file.with_colors(&colors, &record, true, 19)
+        file.with_colors(&colors, &record, curve.as_ref(), true, 19)
             .expect("in-memory rewrite")
     }
 
@@ -380,6 +414,7 @@ mod corpus {
             opacity: Some((0..n).map(|i| (i % 4) as f32 / 3.0).collect()),
         };
         let scene = Scene {
+            tone: None,
             width: 24,
             height: 16,
             blend: Blend::Alpha,
@@ -450,6 +485,50 @@ mod corpus {
             files.push((K::BadChunkLength, "short-genh", assemble(&p)));
         }
         files.push((K::Truncated, "signature-only", format::SIGNATURE.to_vec()));
+        // GTRC (spec §6.6), critical: every way its payload can break the spec refuses
+        // the file.
+        {
+            let good = format::trc::to_payload(&three_curves());
+            let with_trc = |payloads: &[Vec<u8>]| {
+                let mut p = parts.clone();
+                let end = p.len() - 1;
+                for d in payloads {
+                    p.insert(end, (ChunkType::TONE_CURVE, d.clone()));
+                }
+                assemble(&p)
+            };
+            let edited = |f: &dyn Fn(&mut Vec<u8>)| {
+                let mut d = good.clone();
+                f(&mut d);
+                with_trc(&[d])
+            };
+            files.push((K::InvalidValue, "gtrc-2-curves", edited(&|d| d[0] = 2)));
+            files.push((
+                K::InvalidValue,
+                "gtrc-reserved-not-0",
+                edited(&|d| d[1] = 1),
+            ));
+            files.push((
+                K::InvalidValue,
+                "gtrc-1-knot",
+                edited(&|d| d[2..4].copy_from_slice(&1u16.to_be_bytes())),
+            ));
+            files.push((
+                K::BadChunkLength,
+                "gtrc-length-mismatch",
+                edited(&|d| d.truncate(d.len() - 2)),
+            ));
+            files.push((
+                K::BadChunkLength,
+                "gtrc-6-bytes",
+                edited(&|d| d.truncate(6)),
+            ));
+            files.push((
+                K::ChunkOrder,
+                "duplicate-gtrc",
+                with_trc(&[good.clone(), good.clone()]),
+            ));
+        }
         files.push((
             K::Truncated,
             "cut-inside-gcol",
@@ -499,7 +578,7 @@ mod corpus {
             (ChunkType::ENHANCER, "duplicate-genh"),
             (ChunkType::ORIGINAL_COLORS, "duplicate-gorc"),
         ] {
-            let mut p = chunks(&enhanced(&base, false, false));
+            let mut p = chunks(&enhanced(&base, false, false, false));
             let at = p.iter().position(|(t, _)| *t == ty).expect("stage-2 chunk");
             p.insert(at, p[at].clone());
             files.push((K::ChunkOrder, what, assemble(&p)));

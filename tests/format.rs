@@ -464,8 +464,9 @@ fn genh_layout_2_reads_writes_and_refuses_as_specified() {
     ] {
         assert_eq!(kind, ErrorKind::InvalidValue, "{what}");
     }
-    assert_eq!(refused(&|b| b[0] = 4), ErrorKind::UnsupportedVersion);
-    // Byte 3 is 0 in layouts 1 and 2, and never 0 in layout 3.
+    assert_eq!(refused(&|b| b[0] = 5), ErrorKind::UnsupportedVersion);
+    // Byte 3 is 0 in layouts 1 and 2, and never 0 in layouts 3 and 4.
+    assert_eq!(refused(&|b| b[0] = 4), ErrorKind::InvalidValue);
     assert_eq!(refused(&|b| b[3] = 1), ErrorKind::InvalidValue);
     assert_eq!(refused(&|b| b[0] = 3), ErrorKind::InvalidValue);
     // A layout-2 chunk too short for its denoise record.
@@ -545,4 +546,123 @@ fn genh_layout_3_reads_writes_and_refuses_as_specified() {
     let mut as_one = bytes.clone();
     as_one[3] = 2;
     assert!(format::EnhancerRecord::parse(&as_one, &Limits::default()).is_err());
+}
+
+/// §7.2 layout 4: a gain record (bit 2 of byte 3) after the other records and an eighth
+/// block of gains; every field outside its range is refused where the chunk is read.
+#[test]
+fn genh_layout_4_reads_writes_and_refuses_as_specified() {
+    let (record, bytes) = corpus_enhancer("enhanced-gained-alpha-160.gsi");
+    assert_eq!((bytes[0], bytes[3]), (4, 4));
+    let map = record.gain.as_ref().expect("a gain map");
+    assert_eq!((map.width, map.height), (4, 3));
+    assert_eq!(&bytes[68..72], &[0, 4, 0, 3]);
+    assert_eq!(record.to_payload(19).unwrap(), bytes);
+    let (both, both_bytes) = corpus_enhancer("enhanced-denoised-gained-sum-160.gsi");
+    assert_eq!((both_bytes[0], both_bytes[3]), (4, 5));
+    assert!(both.denoise.is_some() && both.gain.is_some());
+    // The gain record follows the denoise record.
+    assert_eq!(&both_bytes[80..84], &[0, 4, 0, 3]);
+    assert_eq!(both.to_payload(19).unwrap(), both_bytes);
+
+    let refused = |edit: &dyn Fn(&mut Vec<u8>)| genh_refused(&bytes, edit);
+    for (what, kind) in [
+        ("records without bit 2", refused(&|b| b[3] = 2)),
+        ("records bit 3", refused(&|b| b[3] = 12)),
+        ("width 0", refused(&|b| b[68..70].copy_from_slice(&[0, 0]))),
+        (
+            "height 1025",
+            refused(&|b| b[70..72].copy_from_slice(&1025u16.to_be_bytes())),
+        ),
+    ] {
+        assert_eq!(kind, ErrorKind::InvalidValue, "{what}");
+    }
+    // Another map size: the last block no longer holds width·height gains.
+    assert!(format::EnhancerRecord::parse(
+        &{
+            let mut b = bytes.clone();
+            b[69] = 5;
+            b
+        },
+        &Limits::default()
+    )
+    .is_err());
+    // Gains outside (0, 64]: the block's range is checked.
+    for (lo, hi) in [(0.0f32, 2.0f32), (-1.0, 2.0), (1.0, 65.0)] {
+        let mut r = record.clone();
+        let g = r.gain.as_mut().unwrap();
+        g.gains.quantizers[0].min = lo;
+        g.gains.quantizers[0].max = hi;
+        assert!(r.to_payload(19).is_err(), "[{lo}, {hi}] written");
+        let mut ok = record.clone();
+        ok.gain.as_mut().unwrap().gains.quantizers[0].max = 2.0;
+        let good = ok.to_payload(19).unwrap();
+        // Write the bad range into the good bytes' gain block preamble, found by the
+        // good range's bytes.
+        let at = good
+            .windows(4)
+            .rposition(|w| w == 2.0f32.to_be_bytes())
+            .expect("the gain block's max");
+        let mut bad = good.clone();
+        bad[at - 4..at].copy_from_slice(&lo.to_be_bytes());
+        bad[at..at + 4].copy_from_slice(&hi.to_be_bytes());
+        let kind = format::EnhancerRecord::parse(&bad, &Limits::default())
+            .expect_err("refused")
+            .kind();
+        assert_eq!(kind, ErrorKind::InvalidValue, "[{lo}, {hi}]");
+    }
+}
+
+/// §6.6's worked example: the chunk as printed, its CRC, and the three values.
+#[test]
+fn spec_tone_curve_example() {
+    let chunk = spec_block("### 6.6 `GTRC`", 2);
+    assert_eq!(&chunk[4..8], b"GTRC");
+    let len = u32::from_be_bytes(chunk[..4].try_into().unwrap()) as usize;
+    let payload = &chunk[8..8 + len];
+    let crc = u32::from_be_bytes(chunk[8 + len..].try_into().unwrap());
+    assert_eq!(format::chunk_crc(ChunkType::TONE_CURVE, payload), crc);
+    let curve = format::trc::parse(payload).unwrap();
+    assert_eq!((curve.curves(), curve.knots()), (1, 3));
+    assert_eq!(curve.values(), &[0, 40000, 65535]);
+    for (c, want, byte) in [
+        (0.25f32, 0.610_360_86f32, 156u8),
+        (0.09, 0.366_216_54, 93),
+        (1.5, 1.0, 255),
+    ] {
+        let v = curve.eval(0, c);
+        assert_eq!(v, want, "{c}");
+        let rgb = gsi::RgbImage {
+            width: 1,
+            height: 1,
+            data: vec![v; 3],
+        };
+        assert_eq!(rgb.to_rgb8()[0], byte, "{c}");
+    }
+    assert_eq!(format::trc::to_payload(&curve), payload);
+}
+
+/// A file with a `GTRC` shows every blended value through it, on the CPU and through
+/// every output of the decoder API; without one, as before.
+#[test]
+fn a_tone_curve_changes_every_output_value_as_specified() {
+    let mut records = Records::from_scene(
+        &random_scene(31, SceneSpec::new(30, 20, 60, Blend::Sum)),
+        BitDepths::default(),
+    );
+    let plain = records.to_scene();
+    let curve = gsi::model::ToneCurve::sample(17, |x| (x * 1.7).sqrt().min(0.9)).unwrap();
+    records.tone = Some(curve.clone());
+    let bytes = format::to_bytes(&records, &WriteOptions::default()).unwrap();
+    let file = format::read_file(&bytes[..], Limits::default()).unwrap();
+    assert_eq!(file.records.tone.as_ref(), Some(&curve));
+    let toned = file.records.to_scene();
+    let (w, h) = (45, 30);
+    let raw = gsi::render::render(&plain, w, h).unwrap();
+    let out = gsi::render::render(&toned, w, h).unwrap();
+    for (i, (o, r)) in out.data.iter().zip(&raw.data).enumerate() {
+        assert_eq!(*o, curve.eval(i % 3, *r), "value {i}");
+    }
+    let image = gsi::decode(&bytes[..], w, h).unwrap();
+    assert_eq!(image.data, out.to_rgb8());
 }

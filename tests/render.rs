@@ -202,6 +202,7 @@ fn hand_built(blend: Blend, cov_param: CovParam, gaussians: &[Hand]) -> Scene {
     }
     g.opacity = Some(gaussians.iter().map(|x| x.3).collect());
     Scene {
+        tone: None,
         width: 20,
         height: 16,
         blend,

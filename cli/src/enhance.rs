@@ -3,8 +3,9 @@
 use crate::device::DeviceArg;
 use crate::{io, Failure};
 use gsi::enhance;
-use gsi::enhance::exposure::{Aim, TOLERANCE};
-use gsi::enhance::fit::{scene_metering, EnhanceOptions};
+use gsi::enhance::curve::CurveOptions;
+use gsi::enhance::exposure::Exposure;
+use gsi::enhance::fit::EnhanceOptions;
 use gsi::format::{ChunkType, ChunkedFile, Limits};
 use std::io::Read;
 use std::path::{Path, PathBuf};
@@ -31,10 +32,9 @@ pub struct Args {
     /// Optimizer iterations of the fit.
     #[arg(long, default_value_t = EnhanceOptions::default().iterations)]
     iterations: u32,
-    /// Set the output's mean brightness (Rec. 601 luma, in (0, 1)) to E, or `auto`: to
-    /// the exposure metered from the image, as a camera meters a scene. Without it the fit
-    /// is pulled towards 0.5 and the edge term holds noisy, textured images below that,
-    /// which scored better on LOL and on a synthetic low-light set (BENCHMARKS.md).
+    /// Show the result at this mean brightness (Rec. 601 luma, in (0, 1)), or `auto`: at
+    /// the exposure metered from the image, as a camera meters a scene. Default: middle
+    /// grey (0.46), where a camera's averaging meter puts a scene's mean.
     #[arg(long, value_name = "E|auto", value_parser = parse_exposure)]
     exposure: Option<Exposure>,
     /// Number of colour operators K, the identity included (paper: 16).
@@ -51,9 +51,10 @@ pub struct Args {
     /// `cpu` the CPU. The render, the loss and the head run on the CPU either way.
     #[arg(long, value_enum, default_value_t = DeviceArg::Auto)]
     device: DeviceArg,
-    /// Enhance even an image that is not low-light, or one enhanced before whose
-    /// original colours were discarded. In a batch, also enhance again the files that
-    /// carry an enhancement (in place) or whose output exists (by default skipped).
+    /// Enhance even an image that is not low-light (less than a quarter of it
+    /// under-exposed), or one enhanced before whose original colours were discarded. In a
+    /// batch, also enhance again the files that carry an enhancement (in place) or whose
+    /// output exists (by default skipped).
     #[arg(long)]
     force: bool,
     /// Undo an earlier enhancement, restoring the file byte for byte.
@@ -70,11 +71,16 @@ pub struct Args {
     /// spec §7.2.1), since brightening multiplies a dark image's sensor noise.
     #[arg(long)]
     no_denoise: bool,
-    /// Exponent of the tone curve after the mixture (format spec §7.2.2): below 1 lifts
-    /// shadows more than highlights, as a camera's curve does between a short exposure
-    /// and a longer one, at the same mean luma. 1 leaves the tones as the mixture made them.
-    #[arg(long, value_name = "G", default_value_t = 0.7, value_parser = tone_exponent)]
+    /// Power of the tone curve the result is shown through (format spec §6.6): below 1
+    /// lifts shadows more than highlights, as a camera's curve does between a short
+    /// exposure and a longer one, and keeps their noise down. 1 only sets the exposure.
+    #[arg(long, value_name = "G", default_value_t = CurveOptions::default().exponent, value_parser = tone_exponent)]
     tone: f32,
+    /// Do not lift the shadows on their own: by default, where a scene's highlights (a
+    /// lamp, a window, a sky) keep the tone curve from reaching the exposure, a gain map
+    /// lifts the darker regions more than the lit ones (format spec §7.2.3).
+    #[arg(long)]
+    no_local: bool,
     /// Seed of the fit's initialization.
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -137,16 +143,9 @@ pub fn run(args: Args) -> Result<(), Failure> {
     Ok(())
 }
 
-/// What `--exposure` asked for.
-#[derive(Clone, Copy, Debug)]
-enum Exposure {
-    Auto,
-    Exactly(f32),
-}
-
 fn parse_exposure(s: &str) -> Result<Exposure, String> {
     if s == "auto" {
-        return Ok(Exposure::Auto);
+        return Ok(Exposure::Metered);
     }
     match s.parse::<f32>() {
         Ok(e) if e > 0.0 && e < 1.0 => Ok(Exposure::Exactly(e)),
@@ -259,63 +258,57 @@ fn enhance_file(
         let source = parse(src, &read_all(src)?)?;
         enhance::apply_from(&file, &source, keep, &limits).map_err(named)?
     } else {
-        let enhanced_before = file.chunks.iter().any(|c| c.ty == ChunkType::ENHANCER);
-        if enhanced_before && file.original().map_err(named)?.is_none() && !args.force {
-            return Err(Failure(format!(
-                "{}: already enhanced and its original colours were discarded; --force enhances the enhanced colours again",
-                input.display()
-            )));
-        }
         let opts = options(args)?;
-        let scene = enhance::base_records(&file, &limits)
-            .map_err(named)?
-            .to_scene();
-        // The rule that chooses the exposure also decides whether to act: a metered
-        // image needs a stop more light, an image given a target must be below it.
-        let m = scene_metering(&scene, opts.work_side);
-        let dark = match opts.aim {
-            Aim::Exact => opts.params.exposure_target > m.own + TOLERANCE,
-            Aim::Balanced | Aim::Metered => m.is_low_light(),
-        };
-        if !dark && !args.force {
-            let why = match opts.aim {
-                Aim::Exact => format!("--exposure {}", opts.params.exposure_target),
-                _ => format!("metered exposure {:.3} (gain {:.2})", m.target, m.gain),
-            };
-            lines.push(format!(
-                "{}: mean luma {:.3}, {why}: not a low-light image, left unchanged (--force enhances it anyway)",
-                input.display(),
-                m.own
-            ));
-            if !args.in_place {
-                write(dest, &bytes)?;
-            }
-            return Ok(lines);
-        }
         let on = device(args, gpu)?.map_or(gsi::Device::Cpu, gsi::Device::Gpu);
         let start = std::time::Instant::now();
-        let (out, fitted) =
-            enhance::enhance(&file, &opts, keep, &limits, on, progress).map_err(named)?;
+        let outcome = enhance::enhance(&file, &opts, keep, &limits, on, progress).map_err(named)?;
+        let done = match outcome {
+            enhance::Outcome::Enhanced(done) => done,
+            enhance::Outcome::NotLowLight(a) => {
+                lines.push(format!(
+                    "{}: {a}: not a low-light image, left unchanged (--force enhances it anyway)",
+                    input.display()
+                ));
+                if !args.in_place {
+                    write(dest, &bytes)?;
+                }
+                return Ok(lines);
+            }
+            enhance::Outcome::OriginalDiscarded => {
+                return Err(Failure(format!(
+                    "{}: already enhanced and its original colours were discarded; --force enhances the enhanced colours again",
+                    input.display()
+                )))
+            }
+        };
+        let fitted = &done.fitted;
         for why in [&fitted.fallback, &fitted.denoise_skipped]
             .into_iter()
             .flatten()
         {
             lines.push(format!("gsi: {why}"));
         }
-        let aim = match opts.aim {
-            Aim::Balanced => "pulled towards",
-            Aim::Exact | Aim::Metered => "set to",
+        let aim = match &done.plan {
+            Some(p) if p.gain.is_some() => format!(
+                " (aimed at {:.3}; shadows lifted on their own, beta {:.2})",
+                p.target, p.beta
+            ),
+            Some(p) if p.capped => {
+                format!(" (aimed at {:.3}; held back by the highlights)", p.target)
+            }
+            Some(p) => format!(" (aimed at {:.3})", p.target),
+            None => String::new(),
         };
         lines.push(format!(
-            "enhanced: mean luma {:.3} -> {:.3} ({aim} {:.3}), K {}, {} iterations, {:.1} s",
-            fitted.mean_luma.0,
-            fitted.mean_luma.1,
-            fitted.record.fit.exposure,
+            "enhanced: {:.0}% under-exposed, mean luma {:.3} -> {:.3}{aim}, K {}, {} iterations, {:.1} s",
+            100.0 * done.assessment.dark_share,
+            done.mean_luma.0,
+            done.mean_luma.1,
             opts.experts,
             opts.iterations,
             start.elapsed().as_secs_f64()
         ));
-        out
+        done.bytes
     };
     write(dest, &out)?;
     lines.push(format!("{}: {} bytes", dest.display(), out.len()));
@@ -338,31 +331,23 @@ fn options(args: &Args) -> Result<EnhanceOptions, Failure> {
         }
     };
     let defaults = EnhanceOptions::default();
-    let (aim, exposure_target) = match args.exposure {
-        None => (Aim::Balanced, defaults.params.exposure_target),
-        Some(Exposure::Auto) => (Aim::Metered, defaults.params.exposure_target),
-        Some(Exposure::Exactly(e)) => (Aim::Exact, e),
-    };
     Ok(EnhanceOptions {
         weights,
-        aim,
+        exposure: args.exposure.unwrap_or_default(),
         learning_rate: args.learning_rate,
         iterations: args.iterations,
         experts: args.experts,
         seed: args.seed,
+        force: args.force,
         denoise: if args.no_denoise {
             None
         } else {
             defaults.denoise
         },
-        tone: (args.tone != 1.0).then_some(gsi::enhance::tone::ToneOptions {
+        curve: Some(CurveOptions {
             exponent: args.tone,
-            ..gsi::enhance::tone::ToneOptions::default()
+            local: !args.no_local,
         }),
-        params: gsi::enhance::loss::LossParams {
-            exposure_target,
-            ..defaults.params
-        },
         ..defaults
     })
 }

@@ -1,7 +1,7 @@
 //! `gsi info`: what a file holds and how compact it is.
 
 use crate::{read_gsi, Failure};
-use gsi::format::{ChunkType, CompressionMeta, EnhancerRecord, GsiFile, Limits};
+use gsi::format::{ChunkType, CompressionMeta, EnhancerRecord, GsiFile, Limits, OriginalColors};
 use serde_json::json;
 use std::path::PathBuf;
 
@@ -38,7 +38,7 @@ fn measured(f: &GsiFile) -> CompressionMeta {
 }
 
 /// What stage 2 left in the file: its enhancer (or why it cannot be read) and whether
-/// the original colours were kept.
+/// the original colours were kept in a `gORC` that `--revert` accepts.
 struct Stage2 {
     enhancer: Option<Result<EnhancerRecord, String>>,
     revertible: bool,
@@ -46,11 +46,20 @@ struct Stage2 {
 
 fn stage2(f: &GsiFile) -> Stage2 {
     let find = |ty| f.ancillary.iter().find(|c| c.ty == ty);
+    let header = &f.records.header;
     Stage2 {
         enhancer: find(ChunkType::ENHANCER)
             .map(|c| EnhancerRecord::parse(&c.data, &Limits::default()).map_err(|e| e.to_string())),
-        revertible: find(ChunkType::ORIGINAL_COLORS).is_some(),
+        revertible: find(ChunkType::ORIGINAL_COLORS).is_some_and(|c| {
+            OriginalColors::parse(&c.data).is_ok_and(|o| o.validate(header).is_ok())
+        }),
     }
+}
+
+/// The range of a gain map's gains.
+fn gain_range(g: &gsi::format::GainMap) -> (f32, f32) {
+    let q = &g.gains.quantizers[0];
+    (q.min, q.max)
 }
 
 /// Bits per Gaussian that each attribute chunk spends, its preamble included (`None`
@@ -125,9 +134,17 @@ fn to_json(f: &GsiFile) -> serde_json::Value {
                 "tone": e.tone.map(|t| json!({
                     "exponent": t.exponent, "scale": t.scale, "passes": t.passes,
                 })),
+                "gain": e.gain.as_ref().map(|g| {
+                    let (lo, hi) = gain_range(g);
+                    json!({"map": [g.width, g.height], "min": lo, "max": hi})
+                }),
                 "revertible": stage.revertible,
             }),
         },
+        "tone_curve": r.tone.as_ref().map(|t| {
+            let at = [0.01f32, 0.05, 0.1, 0.25, 0.5, 1.0].map(|x| [x, t.eval(0, x)]);
+            json!({"curves": t.curves(), "knots": t.knots(), "at": at})
+        }),
         "bits_per_gaussian": bits_per_gaussian(f).map(|b| {
             b.iter()
                 .map(|(ty, bits)| (ty.to_string(), json!(bits)))
@@ -203,7 +220,16 @@ fn to_text(f: &GsiFile) -> String {
                 e.map_height,
                 e.fit.iterations,
                 e.fit.exposure,
-                match e.tone {
+                match &e.gain {
+                    Some(g) => {
+                        let (lo, hi) = gain_range(g);
+                        format!(
+                            ", then a {}x{} gain map ({lo:.2} to {hi:.2}: the shadows lifted on their own)",
+                            g.width, g.height
+                        )
+                    }
+                    None => String::new(),
+                } + &match e.tone {
                     Some(t) => format!(
                         ", then a tone curve ({:.4}·x^{}, {})",
                         t.scale,
@@ -221,6 +247,19 @@ fn to_text(f: &GsiFile) -> String {
         }
         Some(Err(e)) => s += &format!("enhanced, but its gENH chunk is unreadable: {e}\n"),
         None => {}
+    }
+    if let Some(t) = &f.records.tone {
+        let at: Vec<String> = [0.01f32, 0.1, 0.5, 1.0]
+            .iter()
+            .map(|&x| format!("{x} -> {:.3}", t.eval(0, x)))
+            .collect();
+        s += &format!(
+            "shown through a tone curve (GTRC, {} curve{} of {} knots: {})\n",
+            t.curves(),
+            if t.curves() == 1 { "" } else { "s" },
+            t.knots(),
+            at.join(", ")
+        );
     }
     s += "chunks:";
     for c in &f.chunks {

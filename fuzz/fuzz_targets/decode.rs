@@ -69,7 +69,8 @@ fuzz_target!(|data: &[u8]| {
     }
 });
 
-/// Spec §6.4, one pixel at a time over every projected Gaussian in stored order.
+/// Spec §6.4, one pixel at a time over every projected Gaussian in stored order, then
+/// the file's tone curve (§6.6).
 fn reference(scene: &Scene, width: u32, height: u32) -> Vec<f32> {
     let proj = project_scene(scene, width, height);
     let mut out = Vec::with_capacity((width * height * 3) as usize);
@@ -96,6 +97,11 @@ fn reference(scene: &Scene, width: u32, height: u32) -> Vec<f32> {
                             break;
                         }
                     }
+                }
+            }
+            if let Some(t) = &scene.tone {
+                for (k, v) in c.iter_mut().enumerate() {
+                    *v = t.eval(k, *v);
                 }
             }
             out.extend_from_slice(&c);

@@ -1,8 +1,9 @@
 //! Any bytes as the payload of the stage-2 chunks `gENH` and `gORC`: `Ok` or `Err`, never
 //! a panic or more memory than the limits allow. An accepted enhancer must write back to
 //! the same record, and applying it must give finite colours within its clamp or the
-//! identity's range; its denoising (layouts 2 and 3) and its tone curve (layout 3),
-//! finite colours, the curve's within `±64`.
+//! identity's range; its denoising (layouts 2 to 4) and its tone curve (layouts 3 and
+//! 4), finite colours, the curve's within `±64`; its gain map (layout 4), finite colours
+//! within `±64` that keep their sign.
 
 #![no_main]
 
@@ -39,6 +40,7 @@ fuzz_target!(|data: &[u8]| {
     if record.denoise.is_some() || record.tone.is_some() {
         for blend in [Blend::Sum, Blend::Alpha] {
             let scene = Scene {
+                tone: None,
                 width: 7,
                 height: 5,
                 blend,
@@ -68,6 +70,19 @@ fuzz_target!(|data: &[u8]| {
                         .flatten()
                         .all(|x| x.is_finite() && x.abs() <= 64.0),
                     "{out:?}"
+                );
+            }
+        }
+    }
+    if let Some(map) = &record.gain {
+        for (out, c) in gsi::enhance::gain::apply(map, &positions, &colors)
+            .iter()
+            .zip(colors)
+        {
+            for (o, c) in out.iter().zip(c) {
+                assert!(
+                    o.is_finite() && o.abs() <= 64.0 && o * c >= 0.0,
+                    "{o} from {c}"
                 );
             }
         }

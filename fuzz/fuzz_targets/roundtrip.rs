@@ -55,6 +55,7 @@ fuzz_target!(|input: Input| {
         })
         .collect();
     let scene = Scene {
+        tone: None,
         width: side(input.width),
         height: side(input.height),
         blend: if input.alpha {

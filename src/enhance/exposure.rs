@@ -19,12 +19,13 @@
 //! (`cargo run --release --example lowlight_set -- rules`), which is also the
 //! reference set of the synthetic validation set; LOL's references were not used.
 //!
-//! The same rule decides whether to act: an image is low-light when the metered gain is
-//! at least one stop ([`UNDEREXPOSED_GAIN`], [`Metering::is_low_light`]). Kodak's own
-//! photographs meter at gains 1.00–1.68 (five above 1.3), so none of them is touched;
-//! LOL's low images and the synthetic set meter at 4 and more.
+//! The metered exposure is what `--exposure auto` aims at ([`Exposure::Metered`]). The
+//! default aims at middle grey ([`Exposure::MidGrey`]): on the validation pairs it lands
+//! closer to the references' exposure. Whether to act at all is decided locally, by
+//! [`super::assess`]: a global meter reads a lamp or a window as a well-exposed scene.
 
 use super::loss::display_luma;
+use crate::metrics::{linear_to_srgb, srgb_to_linear};
 
 /// Median over the 24 Kodak photographs of the log-average linear luminance (Rec. 709
 /// weights on sRGB-decoded channels, each photograph averaged over 3×3 blocks, `+1e-4`
@@ -37,35 +38,33 @@ pub const KODAK_HIGHLIGHT: f32 = 0.8030;
 /// How close the output's mean luma must land to the target it aims at.
 pub const TOLERANCE: f32 = 0.05;
 
-/// The metered gain (linear light) from which an image counts as under-exposed: one
-/// stop. A photograph a camera exposed well meters near 1 by construction, and half of
-/// them slightly above (the constants are medians): a threshold at the tolerance of the
-/// target would enhance 5 of Kodak's 24.
-pub const UNDEREXPOSED_GAIN: f32 = 2.0;
-
 /// Added to the luminance inside the logarithm of the key, so black pixels count as
 /// very dark rather than infinitely so; the same as when the constants were measured.
 const KEY_EPS: f64 = 1e-4;
 
-/// What a fit aims the output's mean luma at.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum Aim {
-    /// The exposure term pulls towards `E` ([`LossParams::exposure_target`]) and the
-    /// other terms pull back: the spatial term charges every edge that brightening
-    /// amplifies beyond the brightness ratio, so a noisy or textured image settles
-    /// below `E` (LOL eval15: 0.21–0.51 for `E` = 0.5). Measured on eval15 and on the
-    /// synthetic Kodak set, where it settles scores better than reaching either a fixed
-    /// or a metered target (BENCHMARKS.md, session 7), so it is the default.
-    ///
-    /// [`LossParams::exposure_target`]: super::loss::LossParams::exposure_target
+/// The mean luma stage 2 shows its result at (the tone curve's scale, [`super::curve`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub enum Exposure {
+    /// Middle grey, [`super::curve::MID_GREY`]: where a camera's averaging meter puts a
+    /// scene's mean.
     #[default]
-    Balanced,
-    /// Fit as [`Aim::Balanced`], then set one gain shared by every operator so that the
-    /// output's mean luma lands on `E` (within [`TOLERANCE`], where the mixture can reach
-    /// it): the curve's shape comes from the loss, its level from `E`.
-    Exact,
-    /// [`Aim::Exact`], with `E` chosen from the image by [`meter`].
+    MidGrey,
+    /// This mean luma, in `(0, 1)`.
+    Exactly(f32),
+    /// The exposure [`meter`] finds for the image.
     Metered,
+}
+
+impl Exposure {
+    /// The mean luma to aim at for an image of display values `img` (interleaved RGB,
+    /// stage 2's working image).
+    pub fn target(self, img: &[f32]) -> f32 {
+        match self {
+            Exposure::MidGrey => super::curve::MID_GREY,
+            Exposure::Exactly(e) => e,
+            Exposure::Metered => meter(img).target,
+        }
+    }
 }
 
 /// What [`meter`] found.
@@ -79,39 +78,12 @@ pub struct Metering {
     pub target: f32,
 }
 
-impl Metering {
-    /// Whether the image is dark enough to enhance: a well-exposed version of it would
-    /// need at least [`UNDEREXPOSED_GAIN`].
-    pub fn is_low_light(&self) -> bool {
-        self.gain >= UNDEREXPOSED_GAIN
-    }
-}
-
 /// A display value as a screen shows it: clamped to `[0, 1]`, and 0 where not finite.
 fn shown(v: f32) -> f32 {
     if v.is_finite() {
         v.clamp(0.0, 1.0)
     } else {
         0.0
-    }
-}
-
-/// The sRGB decoding curve (IEC 61966-2-1) of a value in `[0, 1]`.
-pub fn srgb_to_linear(v: f64) -> f64 {
-    if v <= 0.04045 {
-        v / 12.92
-    } else {
-        ((v + 0.055) / 1.055).powf(2.4)
-    }
-}
-
-/// The sRGB encoding curve, the inverse of [`srgb_to_linear`], clamped to `[0, 1]`.
-pub fn linear_to_srgb(v: f64) -> f64 {
-    let v = v.clamp(0.0, 1.0);
-    if v <= 0.003_130_8 {
-        v * 12.92
-    } else {
-        1.055 * v.powf(1.0 / 2.4) - 0.055
     }
 }
 
@@ -183,7 +155,7 @@ mod tests {
     #[test]
     fn a_dark_flat_image_is_lifted_to_the_key() {
         let m = meter(&flat(0.02, 64));
-        assert!(m.is_low_light(), "{m:?}");
+        assert!(m.gain > 2.0, "{m:?}");
         // A flat image's key is its luminance (plus the logarithm's epsilon): the gain
         // brings it to KODAK_KEY, the highlight (the same value) asking for more.
         let lum = to_linear(0.02);
@@ -195,7 +167,6 @@ mod tests {
     fn a_bright_image_is_left_alone() {
         let m = meter(&flat(0.6, 64));
         assert_eq!(m.gain, 1.0);
-        assert!(!m.is_low_light(), "{m:?}");
         assert!((m.target - m.own).abs() < 1e-6);
     }
 

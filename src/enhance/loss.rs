@@ -59,11 +59,12 @@ const LOW_LUMA_MIN: f64 = 1e-6;
 const LUMA: [f64; 3] = [0.299, 0.587, 0.114];
 
 /// Rec. 601 luma of a pixel as an 8-bit display shows it (each channel clamped to
-/// `[0, 1]`): what the low-light test, the features and the reports call brightness.
-/// Evaluated in `f32`, channel by channel, so that it is cheap per pixel.
+/// `[0, 1]`, NaN shown as 0): what the low-light test, the features and the reports call
+/// brightness. Evaluated in `f32`, channel by channel, so that it is cheap per pixel.
 pub fn display_luma(p: &[f32]) -> f32 {
     const W: [f32; 3] = [0.299, 0.587, 0.114];
-    W[0] * p[0].clamp(0.0, 1.0) + W[1] * p[1].clamp(0.0, 1.0) + W[2] * p[2].clamp(0.0, 1.0)
+    let shown = |x: f32| if x >= 0.0 { x.min(1.0) } else { 0.0 };
+    W[0] * shown(p[0]) + W[1] * shown(p[1]) + W[2] * shown(p[2])
 }
 
 /// Chroma (`max − min`) at or below which a pixel's hue is taken as 0 with a zero

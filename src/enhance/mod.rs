@@ -5,18 +5,30 @@
 //! operators, mixed per Gaussian by a weight map over the image, is fitted to the one
 //! image with no-reference losses and stored in the file (`gENH`) beside the original
 //! colours (`gORC`), so that the enhancement can be re-applied without fitting
-//! ([`apply_from`]) or undone exactly ([`ChunkedFile::revert`]).
+//! ([`apply_from`]) or undone exactly ([`ChunkedFile::revert`]). The result is shown
+//! through a tone curve on the blended values (`GTRC`), which sets its exposure.
+//!
+//! [`enhance`] is the front door, as [`crate::fit::encode`] is stage 1's: it decides
+//! whether the image is low-light at all ([`assess`]), then denoises, fits the mixture,
+//! and sets the curve and local exposure ([`curve`]).
 //!
 //! * [`mixture`]: the enhancer as stored and applied (no rendering needed).
 //! * [`denoise`]: the smoothing across neighbouring Gaussians that comes before it.
-//! * [`tone`]: the tone curve on the rendered values that comes after it.
-//! * `exposure`: metering the image, for the exposure to aim at and whether to act.
-//! * `features`, `loss`, `operator`, `fit`: fitting it (feature `encode`).
+//! * [`gain`]: the gain map (local exposure) that comes after it.
+//! * [`tone`]: the per-Gaussian tone curve of files written before `GTRC`.
+//! * `assess`, `light`, `curve`, `exposure`: the decision, the illumination estimate, the
+//!   curve and the exposure to aim at (feature `encode`).
+//! * `features`, `loss`, `operator`, `fit`: fitting the mixture (feature `encode`).
 
 pub mod denoise;
+pub mod gain;
 pub mod mixture;
 pub mod tone;
 
+#[cfg(feature = "encode")]
+pub mod assess;
+#[cfg(feature = "encode")]
+pub mod curve;
 #[cfg(feature = "encode")]
 pub mod exposure;
 #[cfg(feature = "encode")]
@@ -25,6 +37,8 @@ pub mod features;
 pub mod fit;
 #[cfg(all(feature = "encode", feature = "gpu"))]
 pub(crate) mod gpu;
+#[cfg(feature = "encode")]
+pub mod light;
 #[cfg(feature = "encode")]
 pub mod loss;
 #[cfg(feature = "encode")]
@@ -41,6 +55,7 @@ use crate::model::Scene;
 pub fn base_records(file: &ChunkedFile, limits: &Limits) -> Result<Records> {
     Ok(Records {
         colors: file.base_colors(limits)?,
+        tone: None,
         ..file.file.records.clone()
     })
 }
@@ -56,8 +71,8 @@ pub fn colors_like(colors: &[[f32; 3]], like: &Attribute) -> Attribute {
 }
 
 /// Apply the enhancer stored in `source` to the colours of `target` (its original
-/// colours, when it was enhanced before and kept them): no fitting and no rendering.
-/// Returns the new file.
+/// colours, when it was enhanced before and kept them), and show them through
+/// `source`'s tone curve: no fitting and no rendering. Returns the new file.
 pub fn apply_from(
     target: &ChunkedFile,
     source: &ChunkedFile,
@@ -72,12 +87,13 @@ pub fn apply_from(
     })?;
     let base = base_records(target, limits)?;
     let colors = apply_record(&record, &base.to_scene(), limits)?;
-    rewrite(target, &base, &colors, &record, keep_original)
+    let tone = source.file.records.tone.as_ref();
+    rewrite(target, &base, &colors, &record, tone, keep_original)
 }
 
 /// The colours the stored enhancer `record` makes of `scene`'s (spec §7.2): its
-/// denoising first, where it has one, then the mixture, then its tone curve, where it
-/// has one. Fails only where the footprint search of the denoising or the curve would
+/// denoising first, where it has one, then the mixture, then its gain map and its
+/// per-Gaussian tone curve, where it has them. Fails only where the footprint search of the denoising or the curve would
 /// pass `limits`.
 pub fn apply_record(
     record: &EnhancerRecord,
@@ -96,17 +112,57 @@ pub fn apply_record(
         _ => g.colors.clone(),
     };
     let colors = Enhancer::from_record(record).apply(&g.positions, &colors);
+    let colors = match &record.gain {
+        Some(map) => gain::apply(map, &g.positions, &colors),
+        None => colors,
+    };
     Ok(match (&record.tone, &nb) {
         (Some(t), Some(nb)) => tone::apply(nb, &colors, t),
         _ => colors,
     })
 }
 
-/// Fit an enhancer to the file's (original) colours, with its mixture on `device`, and
-/// return the rewritten file with what the fit did. With `opts.denoise`, the colours are
-/// denoised first, and with `opts.tone` the mixture's output goes through a tone curve;
-/// the enhancer stores both. The caller decides beforehand whether
-/// the image needs it ([`fit::scene_metering`], [`exposure::Metering::is_low_light`]).
+/// What [`enhance`] did with a file.
+#[cfg(feature = "encode")]
+#[derive(Debug)]
+pub enum Outcome {
+    /// The enhanced file, and what the fit did.
+    Enhanced(Box<Enhanced>),
+    /// Left as it is: no meaningful part of the image is under-exposed.
+    NotLowLight(assess::Assessment),
+    /// Left as it is: the file was enhanced before and its original colours were
+    /// discarded, so enhancing again would brighten what was brightened.
+    OriginalDiscarded,
+}
+
+/// An enhanced file.
+#[cfg(feature = "encode")]
+#[derive(Debug)]
+pub struct Enhanced {
+    /// The new file.
+    pub bytes: Vec<u8>,
+    /// The fitted mixture and the colours it stored.
+    pub fitted: fit::Fitted,
+    /// The tone curve and local exposure it is shown with (`None` where the options
+    /// asked for no curve).
+    pub plan: Option<curve::Plan>,
+    /// Why the image was enhanced (or that `force` asked for it).
+    pub assessment: assess::Assessment,
+    /// Mean luma of the working image as it was and as it is shown now.
+    pub mean_luma: (f32, f32),
+}
+
+/// Stage 2's front door: enhance `file` (from its original colours, when it was
+/// enhanced before and kept them), with the mixture on `device`.
+///
+/// Unless `opts.force`, a file is left as it is when less than a quarter of the image
+/// is under-exposed ([`assess`], [`Outcome::NotLowLight`]) and when it was enhanced before
+/// without keeping its original colours ([`Outcome::OriginalDiscarded`]). Otherwise the
+/// colours are denoised (`opts.denoise`), the mixture is fitted ([`fit::fit`]), and the
+/// result is shown through a tone curve at the exposure `opts.exposure` asks for, with
+/// its shadows lifted by a gain map where the scene's highlights hold the curve back
+/// (`opts.curve`, [`curve::plan`]). The enhancer goes into `gENH`, the curve into `GTRC`,
+/// and the original colours into `gORC` when `keep_original`.
 #[cfg(feature = "encode")]
 pub fn enhance(
     file: &ChunkedFile,
@@ -115,57 +171,86 @@ pub fn enhance(
     limits: &Limits,
     device: crate::Device<'_>,
     progress: &mut dyn FnMut(&fit::Progress),
-) -> Result<(Vec<u8>, fit::Fitted)> {
+) -> Result<Outcome> {
+    let enhanced_before = file
+        .chunks
+        .iter()
+        .any(|c| c.ty == crate::format::ChunkType::ENHANCER);
+    if enhanced_before && file.original()?.is_none() && !opts.force {
+        return Ok(Outcome::OriginalDiscarded);
+    }
     let base = base_records(file, limits)?;
     let mut scene = base.to_scene();
+    let assessment = assess::assess(&scene, opts.work_side);
+    if !assessment.is_low_light() && !opts.force {
+        return Ok(Outcome::NotLowLight(assessment));
+    }
     // Denoised first, so that the fit sees (and its losses measure) the cleaner image. A
     // scene whose footprints overlap too much for the neighbour search (within `limits`)
-    // is enhanced without it and without the tone curve (which needs the same search),
-    // and the caller is told.
+    // is enhanced without it, and the caller is told.
     let mut stored_denoise = None;
     let mut skipped = None;
-    let mut nb = None;
-    if opts.denoise.is_some() || opts.tone.is_some() {
+    if let Some(o) = &opts.denoise {
         match denoise::Neighbours::new(&scene, limits) {
-            Ok(found) => nb = Some(found),
+            Ok(nb) => {
+                stored_denoise = o.resolve(&nb, &scene.gaussians.colors);
+                if let Some(d) = &stored_denoise {
+                    scene.gaussians.colors = nb.denoise(&scene.gaussians.colors, d);
+                }
+            }
             Err(e) if e.kind() == crate::format::ErrorKind::LimitExceeded => {
-                skipped = Some(format!("enhanced without denoising or tone curve: {e}"));
+                skipped = Some(format!("enhanced without denoising: {e}"));
             }
             Err(e) => return Err(e),
         }
     }
-    if let (Some(o), Some(nb)) = (&opts.denoise, &nb) {
-        stored_denoise = o.resolve(nb, &scene.gaussians.colors);
-        if let Some(d) = &stored_denoise {
-            scene.gaussians.colors = nb.denoise(&scene.gaussians.colors, d);
-        }
-    }
     let mut fitted = fit::fit(&scene, opts, &features::FeatureBank, device, progress);
     fitted.record.denoise = stored_denoise;
-    // The curve last, on the mixture's output, keeping the mean luma the fit reached.
-    if let (Some(o), Some(nb)) = (&opts.tone, &nb) {
-        fitted.record.tone = o.resolve(nb, &scene, &fitted.colors, opts.work_side);
-        if let Some(t) = &fitted.record.tone {
-            fitted.colors = tone::apply(nb, &fitted.colors, t);
-        }
-    }
     fitted.denoise_skipped = skipped;
-    let bytes = rewrite(file, &base, &fitted.colors, &fitted.record, keep_original)?;
-    Ok((bytes, fitted))
+    let plan = opts.curve.map(|c| {
+        let target = opts
+            .exposure
+            .target(&fit::working_image(&scene, opts.work_side));
+        curve::plan(&scene, &fitted.colors, target, &c, opts.work_side)
+    });
+    let mut shown_luma = fitted.mean_luma.1;
+    if let Some(p) = &plan {
+        fitted.record.gain = p.gain.clone();
+        fitted.colors = p.colors.clone();
+        shown_luma = p.mean_luma;
+    }
+    let tone = plan.as_ref().map(|p| &p.curve);
+    let bytes = rewrite(
+        file,
+        &base,
+        &fitted.colors,
+        &fitted.record,
+        tone,
+        keep_original,
+    )?;
+    Ok(Outcome::Enhanced(Box::new(Enhanced {
+        bytes,
+        mean_luma: (assessment.mean_luma, shown_luma),
+        fitted,
+        plan,
+        assessment,
+    })))
 }
 
 /// `file` with `colors` (quantized like the base colours) and the enhancer `record` in
-/// place of its base colours.
+/// place of its base colours, shown through `tone`.
 fn rewrite(
     file: &ChunkedFile,
     base: &Records,
     colors: &[[f32; 3]],
     record: &crate::format::EnhancerRecord,
+    tone: Option<&crate::model::ToneCurve>,
     keep_original: bool,
 ) -> Result<Vec<u8>> {
     file.with_colors(
         &colors_like(colors, &base.colors),
         record,
+        tone,
         keep_original,
         crate::format::WriteOptions::default().zstd_level,
     )

@@ -383,6 +383,7 @@ impl<'a> Fitter<'a> {
 
     fn scene_of(&self, g: GaussianSet) -> Scene {
         Scene {
+            tone: None,
             width: self.target.width,
             height: self.target.height,
             blend: self.blend,
@@ -1020,6 +1021,7 @@ pub fn encode(
         // kodim23), and place again the count that this cost fits in the budget. Measured
         // before the colour solve, which then runs once.
         let scene = Scene {
+            tone: None,
             width: w,
             height: h,
             blend: opts.blend,

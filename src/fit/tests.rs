@@ -164,6 +164,7 @@ fn smooth_scene(blend: Blend, seed: u64) -> Scene {
         g.opacity = Some((0..5).map(|_| rng.range(0.2, 0.55)).collect());
     }
     Scene {
+        tone: None,
         width: w,
         height: h,
         blend,

@@ -22,6 +22,8 @@ impl ChunkType {
     pub const COLORS: ChunkType = ChunkType(*b"GCOL");
     pub const OPACITY: ChunkType = ChunkType(*b"GOPA");
     pub const END: ChunkType = ChunkType(*b"GEND");
+    /// The tone curve every blended value goes through (spec §6.6, version 1.2).
+    pub const TONE_CURVE: ChunkType = ChunkType(*b"GTRC");
     /// Compression metadata.
     pub const COMPRESSION_META: ChunkType = ChunkType(*b"gCRM");
     /// Reserved: a fitted stage-2 enhancer.

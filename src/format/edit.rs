@@ -4,7 +4,8 @@
 //! re-quantize and re-compress the geometry, so it could change bytes the enhancer never
 //! touched, and undoing it could not be exact. Instead a file is handled as its list of
 //! chunks: `GCOL` is replaced, `gCRM` is rewritten to describe the new size (spec §7.1),
-//! `gENH` and `gORC` are added before `GEND`, and everything else is copied untouched.
+//! `GTRC`, `gENH` and `gORC` are added before `GEND`, and everything else is copied
+//! untouched (spec §7.4).
 
 use super::chunk::{framed_len, write_chunk, ChunkType, RawChunk, SIGNATURE};
 use super::enhancer::{EnhancerRecord, OriginalColors};
@@ -14,6 +15,7 @@ use super::limits::Limits;
 use super::meta::{CompressionMeta, MAX_SETTINGS_LEN};
 use super::reader::{read_file, GsiFile};
 use super::records::Attribute;
+use crate::model::ToneCurve;
 
 /// A validated file together with the payload of each of its chunks, in stream order.
 #[derive(Clone, Debug)]
@@ -62,11 +64,18 @@ impl ChunkedFile {
             .transpose()
     }
 
-    /// The colours as they were before stage 2, if the file kept them.
+    /// The colours as they were before stage 2, if the file kept them, checked as spec
+    /// §7.3 asks: a `GCOL` payload for this file's header, and a valid `gCRM` payload
+    /// where the flag says one follows. An invalid `gORC` is an error, so that nothing
+    /// calls a file revertible that [`revert`](Self::revert) would refuse.
     pub fn original(&self) -> Result<Option<OriginalColors>> {
-        self.find(ChunkType::ORIGINAL_COLORS)
-            .map(|c| OriginalColors::parse(&c.data).map_err(self.blame(ChunkType::ORIGINAL_COLORS)))
-            .transpose()
+        let Some(c) = self.find(ChunkType::ORIGINAL_COLORS) else {
+            return Ok(None);
+        };
+        let blame = self.blame(ChunkType::ORIGINAL_COLORS);
+        let orc = OriginalColors::parse(&c.data).map_err(&blame)?;
+        orc.validate(&self.file.records.header).map_err(&blame)?;
+        Ok(Some(orc))
     }
 
     /// The colour records stage 2 starts from: those in `gORC` when the file was already
@@ -86,10 +95,13 @@ impl ChunkedFile {
     ///
     /// The colours the file had before its first enhancement go into `gORC` when
     /// `keep_original`, so that [`revert`](Self::revert) can restore it byte for byte.
+    /// The file shows its blended values through `tone` (spec §6.6) where there is one;
+    /// any `GTRC` it had is dropped.
     pub fn with_colors(
         &self,
         colors: &Attribute,
         enhancer: &EnhancerRecord,
+        tone: Option<&ToneCurve>,
         keep_original: bool,
         zstd_level: i32,
     ) -> Result<Vec<u8>> {
@@ -115,8 +127,14 @@ impl ChunkedFile {
         let mut out: Vec<RawChunk> = Vec::with_capacity(self.chunks.len() + 2);
         for c in &self.chunks {
             match c.ty {
-                ChunkType::ENHANCER | ChunkType::ORIGINAL_COLORS => {}
+                ChunkType::ENHANCER | ChunkType::ORIGINAL_COLORS | ChunkType::TONE_CURVE => {}
                 ChunkType::END => {
+                    if let Some(t) = tone {
+                        out.push(RawChunk {
+                            ty: ChunkType::TONE_CURVE,
+                            data: super::trc::to_payload(t),
+                        });
+                    }
                     out.push(RawChunk {
                         ty: ChunkType::ENHANCER,
                         data: enhancer.to_payload(zstd_level)?,
@@ -172,8 +190,8 @@ impl ChunkedFile {
         join(&out)
     }
 
-    /// The file as it was before stage 2: `GCOL` and `gCRM` from `gORC`, and no `gENH`
-    /// or `gORC`. Exact for files whose chunks were last rewritten by
+    /// The file as it was before stage 2: `GCOL` and `gCRM` from `gORC`, and no `gENH`,
+    /// `gORC` or `GTRC`. Exact for files whose chunks were last rewritten by
     /// [`with_colors`](Self::with_colors).
     pub fn revert(&self) -> Result<Vec<u8>> {
         let original = self.original()?.ok_or_else(|| {
@@ -185,7 +203,7 @@ impl ChunkedFile {
         let mut out = Vec::with_capacity(self.chunks.len());
         for c in &self.chunks {
             match c.ty {
-                ChunkType::ENHANCER | ChunkType::ORIGINAL_COLORS => {}
+                ChunkType::ENHANCER | ChunkType::ORIGINAL_COLORS | ChunkType::TONE_CURVE => {}
                 ChunkType::COLORS => out.push(RawChunk {
                     ty: c.ty,
                     data: original.colors.clone(),

@@ -20,10 +20,20 @@ pub const ENHANCER_VERSION_DENOISED: u8 = 2;
 /// the [`Denoise`] and [`Tone`] records follow the fixed part (bit 0 and bit 1; bit 1 is
 /// always set, since without a tone record layouts 1 and 2 serve).
 pub const ENHANCER_VERSION_TONED: u8 = 3;
-/// Byte 3 of layout 3: a denoise record follows.
+/// `gENH` layout of an enhancer with a gain map after the mixture (spec §7.2.3): byte 3
+/// as in layout 3 plus bit 2 (always set), a 4-byte [`GainMap`] record after the others
+/// and an eighth block, the gains.
+pub const ENHANCER_VERSION_GAINED: u8 = 4;
+/// Byte 3 of layouts 3 and 4: a denoise record follows.
 pub const RECORD_DENOISE: u8 = 1;
-/// Byte 3 of layout 3: a tone record follows (after the denoise record, if any).
+/// Byte 3 of layouts 3 and 4: a tone record follows (after the denoise record, if any).
 pub const RECORD_TONE: u8 = 2;
+/// Byte 3 of layout 4: a gain record follows the others, and block 7 holds the gains.
+pub const RECORD_GAIN: u8 = 4;
+/// Bytes of the gain record of layout 4.
+pub const GAIN_LEN: usize = 4;
+/// Largest gain a gain map may hold (spec §7.2.3).
+pub const MAX_GAIN: f32 = 64.0;
 /// Bytes of the tone record of layout 3.
 pub const TONE_LEN: usize = 12;
 /// Most tone passes a `gENH` may ask for.
@@ -92,6 +102,17 @@ pub struct Tone {
     pub passes: u8,
 }
 
+/// The gain map that runs after the mixture (spec §7.2.3): `width × height` positive gains
+/// over the image, bilinearly interpolated at each Gaussian's centre. What the numbers do
+/// is `crate::enhance::gain`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GainMap {
+    pub width: u16,
+    pub height: u16,
+    /// The gains, row by row, one component each, every one in `(0, MAX_GAIN]`.
+    pub gains: Attribute,
+}
+
 /// A `gENH` chunk: the mixture of colour operators and the weight map that mixes them.
 ///
 /// Every learned number is stored quantized (as an [`Attribute`] of one component, the
@@ -116,8 +137,10 @@ pub struct EnhancerRecord {
     pub fit: FitSettings,
     /// Smoothing applied to the colours before the mixture (layouts 2 and 3), if any.
     pub denoise: Option<Denoise>,
-    /// Tone curve applied after the mixture (layout 3), if any.
+    /// Tone curve applied after the mixture (layouts 3 and 4), if any.
     pub tone: Option<Tone>,
+    /// Gain map applied after the mixture, before any tone curve (layout 4), if any.
+    pub gain: Option<GainMap>,
 }
 
 /// Number of values in each of the six tensors of one operator.
@@ -134,13 +157,16 @@ impl EnhancerRecord {
     /// The payload of a `gENH` chunk.
     pub fn to_payload(&self, zstd_level: i32) -> Result<Vec<u8>> {
         self.validate()?;
-        let (version, records) = match (&self.denoise, &self.tone) {
-            (None, None) => (ENHANCER_VERSION, 0),
-            (Some(_), None) => (ENHANCER_VERSION_DENOISED, 0),
-            (d, Some(_)) => (
-                ENHANCER_VERSION_TONED,
-                RECORD_TONE | if d.is_some() { RECORD_DENOISE } else { 0 },
-            ),
+        let bit = |present: bool, b: u8| if present { b } else { 0 };
+        let records = bit(self.denoise.is_some(), RECORD_DENOISE)
+            | bit(self.tone.is_some(), RECORD_TONE)
+            | bit(self.gain.is_some(), RECORD_GAIN);
+        // The lowest layout that holds what is stored (spec §7.2).
+        let (version, records) = match records {
+            0 => (ENHANCER_VERSION, 0),
+            RECORD_DENOISE => (ENHANCER_VERSION_DENOISED, 0),
+            r if r & RECORD_GAIN == 0 => (ENHANCER_VERSION_TONED, r),
+            r => (ENHANCER_VERSION_GAINED, r),
         };
         let mut out = vec![version, self.experts, self.hidden, records];
         out.write_f32::<BigEndian>(self.clamp[0])?;
@@ -164,7 +190,12 @@ impl EnhancerRecord {
         if let Some(t) = &self.tone {
             write_record(&mut out, t.exponent, t.scale, t.passes);
         }
-        for a in std::iter::once(&self.map).chain(&self.tensors) {
+        if let Some(g) = &self.gain {
+            out.write_u16::<BigEndian>(g.width)?;
+            out.write_u16::<BigEndian>(g.height)?;
+        }
+        let gains = self.gain.as_ref().map(|g| &g.gains);
+        for a in std::iter::once(&self.map).chain(&self.tensors).chain(gains) {
             let p = a.to_payload(zstd_level)?;
             out.write_u32::<BigEndian>(p.len() as u32)?;
             out.extend_from_slice(&p);
@@ -182,6 +213,9 @@ impl EnhancerRecord {
         }
         if let Some(t) = &self.tone {
             check_tone(t)?;
+        }
+        if let Some(g) = &self.gain {
+            check_gain(g)?;
         }
         for (a, n) in std::iter::once(&self.map)
             .chain(&self.tensors)
@@ -208,31 +242,47 @@ impl EnhancerRecord {
                 ),
             ));
         }
-        // Which records follow the fixed part: (denoise, tone).
-        let (has_denoise, has_tone) = match (p[0], p[3]) {
-            (ENHANCER_VERSION, 0) => (false, false),
-            (ENHANCER_VERSION_DENOISED, 0) => (true, false),
+        // Which records follow the fixed part (byte 3's bits, spec §7.2).
+        let records = match (p[0], p[3]) {
+            (ENHANCER_VERSION, 0) => 0,
+            (ENHANCER_VERSION_DENOISED, 0) => RECORD_DENOISE,
             (ENHANCER_VERSION_TONED, r)
                 if r & !(RECORD_DENOISE | RECORD_TONE) == 0 && r & RECORD_TONE != 0 =>
             {
-                (r & RECORD_DENOISE != 0, true)
+                r
             }
-            (ENHANCER_VERSION | ENHANCER_VERSION_DENOISED | ENHANCER_VERSION_TONED, r) => {
-                return Err(invalid(format!("gENH layout {}: byte 3 is {r:#04x}", p[0])))
+            (ENHANCER_VERSION_GAINED, r)
+                if r & !(RECORD_DENOISE | RECORD_TONE | RECORD_GAIN) == 0
+                    && r & RECORD_GAIN != 0 =>
+            {
+                r
             }
+            (
+                ENHANCER_VERSION
+                | ENHANCER_VERSION_DENOISED
+                | ENHANCER_VERSION_TONED
+                | ENHANCER_VERSION_GAINED,
+                r,
+            ) => return Err(invalid(format!("gENH layout {}: byte 3 is {r:#04x}", p[0]))),
             (v, _) => {
                 return Err(Error::new(
                     ErrorKind::UnsupportedVersion,
                     format!(
                         "gENH layout {v}, this decoder reads {ENHANCER_VERSION} to \
-                         {ENHANCER_VERSION_TONED}"
+                         {ENHANCER_VERSION_GAINED}"
                     ),
                 ))
             }
         };
+        let (has_denoise, has_tone, has_gain) = (
+            records & RECORD_DENOISE != 0,
+            records & RECORD_TONE != 0,
+            records & RECORD_GAIN != 0,
+        );
         let denoise_at = ENHANCER_FIXED_LEN;
         let tone_at = denoise_at + if has_denoise { DENOISE_LEN } else { 0 };
-        let blocks_at = tone_at + if has_tone { TONE_LEN } else { 0 };
+        let gain_at = tone_at + if has_tone { TONE_LEN } else { 0 };
+        let blocks_at = gain_at + if has_gain { GAIN_LEN } else { 0 };
         if p.len() < blocks_at {
             return Err(Error::new(
                 ErrorKind::BadChunkLength,
@@ -272,7 +322,7 @@ impl EnhancerRecord {
             None
         };
         let tone = if has_tone {
-            let (exponent, scale, passes) = read_record(&p[tone_at..blocks_at], "tone")?;
+            let (exponent, scale, passes) = read_record(&p[tone_at..gain_at], "tone")?;
             let t = Tone {
                 exponent,
                 scale,
@@ -284,13 +334,24 @@ impl EnhancerRecord {
             None
         };
 
+        let gain_shape = has_gain.then(|| {
+            (
+                BigEndian::read_u16(&p[gain_at..gain_at + 2]),
+                BigEndian::read_u16(&p[gain_at + 2..gain_at + 4]),
+            )
+        });
+        if let Some((w, h)) = gain_shape {
+            check_gain_shape(w, h)?;
+        }
+        let gain_count = gain_shape.map(|(w, h)| u64::from(w) * u64::from(h));
+
         let mut budget = AllocBudget::new(limits);
         let mut rest = &p[blocks_at..];
-        let mut blocks = Vec::with_capacity(7);
-        for (b, n) in counts(experts, hidden, map_width, map_height)
+        let mut blocks = Vec::with_capacity(8);
+        let all = counts(experts, hidden, map_width, map_height)
             .into_iter()
-            .enumerate()
-        {
+            .chain(gain_count);
+        for (b, n) in all.enumerate() {
             if rest.len() < 4 {
                 return Err(Error::new(
                     ErrorKind::BadChunkLength,
@@ -324,6 +385,18 @@ impl EnhancerRecord {
         let mut blocks = blocks.into_iter();
         let map = blocks.next().expect("seven blocks");
         let tensors = std::array::from_fn(|_| blocks.next().expect("seven blocks"));
+        let gain = match (gain_shape, blocks.next()) {
+            (Some((width, height)), Some(gains)) => {
+                let g = GainMap {
+                    width,
+                    height,
+                    gains,
+                };
+                check_gain(&g)?;
+                Some(g)
+            }
+            _ => None,
+        };
         Ok(EnhancerRecord {
             experts,
             hidden,
@@ -335,6 +408,7 @@ impl EnhancerRecord {
             fit,
             denoise,
             tone,
+            gain,
         })
     }
 }
@@ -438,6 +512,38 @@ fn check_tone(t: &Tone) -> Result<()> {
     Ok(())
 }
 
+fn check_gain_shape(width: u16, height: u16) -> Result<()> {
+    for side in [width, height] {
+        if !(1..=MAX_MAP_SIDE).contains(&side) {
+            return Err(invalid(format!(
+                "gain map side {side}, allowed 1..={MAX_MAP_SIDE}"
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Spec §7.2.3: sides in `1..=1024`, `width·height` gains, each in `(0, 64]`. The gains
+/// of a block lie between its quantizer's ends, so checking the ends checks them all.
+fn check_gain(g: &GainMap) -> Result<()> {
+    check_gain_shape(g.width, g.height)?;
+    let n = usize::from(g.width) * usize::from(g.height);
+    if g.gains.components() != 1 || g.gains.count() != n {
+        return Err(invalid(format!(
+            "gain map block of {} values, expected {n}",
+            g.gains.count()
+        )));
+    }
+    let q = &g.gains.quantizers[0];
+    if !(q.min > 0.0 && q.max <= MAX_GAIN && q.min <= q.max) {
+        return Err(invalid(format!(
+            "gain map range [{}, {}], allowed (0, {MAX_GAIN}]",
+            q.min, q.max
+        )));
+    }
+    Ok(())
+}
+
 /// A `gORC` chunk: what stage 2 replaced, so that `--revert` restores the file exactly.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct OriginalColors {
@@ -466,8 +572,19 @@ impl OriginalColors {
         Ok(out)
     }
 
+    /// The checks of spec §7.3 beyond the framing [`parse`](Self::parse) checks: the
+    /// colours are a `GCOL` payload for `header`, and the metadata, where there is
+    /// some, a valid `gCRM` payload.
+    pub fn validate(&self, header: &super::header::Header) -> Result<()> {
+        Attribute::parse_standalone(&self.colors, 3, header.count, &Limits::default())?;
+        if let Some(m) = &self.metadata {
+            super::meta::CompressionMeta::parse(m)?;
+        }
+        Ok(())
+    }
+
     /// Split a `gORC` payload. The parts are only framed here: they are parsed as `GCOL`
-    /// and `gCRM` payloads where they are used.
+    /// and `gCRM` payloads where they are used ([`validate`](Self::validate)).
     pub fn parse(p: &[u8]) -> Result<OriginalColors> {
         if p.len() < 5 {
             return Err(Error::new(

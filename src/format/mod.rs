@@ -15,13 +15,15 @@ mod meta;
 pub mod quant;
 mod reader;
 mod records;
+pub mod trc;
 mod writer;
 
 pub use chunk::{chunk_crc, ChunkInfo, ChunkType, RawChunk, SIGNATURE};
 pub use edit::ChunkedFile;
 pub use enhancer::{
-    tensor_sizes, Denoise, EnhancerRecord, FitSettings, OriginalColors, Tone, MAX_DENOISE_PASSES,
-    MAX_EXPERTS, MAX_HIDDEN, MAX_TONE_EXPONENT, MAX_TONE_PASSES, TENSORS,
+    tensor_sizes, Denoise, EnhancerRecord, FitSettings, GainMap, OriginalColors, Tone,
+    MAX_DENOISE_PASSES, MAX_EXPERTS, MAX_GAIN, MAX_HIDDEN, MAX_TONE_EXPONENT, MAX_TONE_PASSES,
+    TENSORS,
 };
 pub use error::{Error, ErrorKind, Result};
 pub use header::{
@@ -43,6 +45,7 @@ pub mod tests_support {
     /// A 4×3 scene of two Gaussians.
     pub fn tiny_scene() -> Scene {
         Scene {
+            tone: None,
             width: 4,
             height: 3,
             blend: Blend::Sum,

@@ -58,6 +58,10 @@ fn length_range(ty: ChunkType) -> Option<(u32, u32)> {
         ),
         ChunkType::ENHANCER => (super::enhancer::MIN_ENHANCER_LEN as u32, u32::MAX),
         ChunkType::ORIGINAL_COLORS => ((5 + pre(3)) as u32, u32::MAX),
+        ChunkType::TONE_CURVE => (
+            super::trc::MIN_TRC_LEN as u32,
+            super::trc::MAX_TRC_LEN as u32,
+        ),
         _ => return None,
     })
 }
@@ -109,6 +113,7 @@ impl<R: Read> Decoder<R> {
     pub fn finish(mut self) -> Result<GsiFile> {
         let header = self.read_header()?;
         let (mut pos, mut cov, mut col, mut opa, mut meta) = (None, None, None, None, None);
+        let mut tone = None;
         // Stage 2's chunks are kept unparsed (spec §2.3), but each may appear once.
         let (mut enhancer, mut original) = (false, false);
         let mut ancillary = Vec::new();
@@ -149,6 +154,10 @@ impl<R: Read> Decoder<R> {
                     once(opa.is_some())?;
                     opa = Some(attr(1)?);
                 }
+                ChunkType::TONE_CURVE => {
+                    once(tone.is_some())?;
+                    tone = Some(super::trc::parse(&c.data).map_err(here)?);
+                }
                 ChunkType::COMPRESSION_META => {
                     once(meta.is_some())?;
                     meta = Some(CompressionMeta::parse(&c.data).map_err(here)?);
@@ -185,6 +194,7 @@ impl<R: Read> Decoder<R> {
             covariance: cov.ok_or_else(|| missing("GCOV"))?,
             colors: col.ok_or_else(|| missing("GCOL"))?,
             opacity: opa,
+            tone,
         };
         Ok(GsiFile {
             records,

@@ -246,6 +246,8 @@ pub struct Records {
     pub colors: Attribute,
     /// `None`: no `GOPA` chunk, every opacity is 1.
     pub opacity: Option<Attribute>,
+    /// The `GTRC` chunk (spec §6.6): `None`, the blended values are shown as they are.
+    pub tone: Option<crate::model::ToneCurve>,
 }
 
 /// Bits per component an encoder spends on each attribute.
@@ -314,6 +316,7 @@ impl Records {
             covariance: Attribute::fit(&g.cov, bits.of_covariance(scene.cov_param)),
             colors: Attribute::fit(&g.colors, [bits.color; 3]),
             opacity,
+            tone: scene.tone.clone(),
         }
     }
 
@@ -334,6 +337,7 @@ impl Records {
                     .as_ref()
                     .map(|a| a.values::<1>().into_iter().map(|[o]| o).collect()),
             },
+            tone: self.tone.clone(),
         }
     }
 

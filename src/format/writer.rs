@@ -39,8 +39,8 @@ impl Default for WriteOptions {
 
 /// Write a complete file and return its size in bytes.
 ///
-/// Chunk order: signature, `GHDR`, `gCRM`, `GPOS`, `GCOV`, `GCOL`, `GOPA`, the given
-/// ancillary chunks, `GEND`. Every payload is built first so that `gCRM` can state the
+/// Chunk order: signature, `GHDR`, `gCRM`, `GPOS`, `GCOV`, `GCOL`, `GOPA`, `GTRC`, the
+/// given ancillary chunks, `GEND`. Every payload is built first so that `gCRM` can state the
 /// exact size of the file it is part of.
 pub fn write_file<W: Write>(w: &mut W, records: &Records, opts: &WriteOptions) -> Result<u64> {
     if !records.is_consistent() {
@@ -68,6 +68,9 @@ pub fn write_file<W: Write>(w: &mut W, records: &Records, opts: &WriteOptions) -
             coded |= p[attribute_preamble_len(a.components()) - 5] == METHOD_CODED;
             body.push((ty, p));
         }
+    }
+    if let Some(t) = &records.tone {
+        body.push((ChunkType::TONE_CURVE, super::trc::to_payload(t)));
     }
     body.extend(opts.ancillary.iter().map(|c| (c.ty, c.data.clone())));
 

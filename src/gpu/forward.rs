@@ -383,6 +383,8 @@ pub struct GpuScene<'g> {
     height: u32,
     forward: Forward,
     lists: ForwardLists,
+    /// The scene's tone curve (spec §6.6), applied on the CPU to what is read back.
+    tone: Option<crate::model::ToneCurve>,
 }
 
 impl<'g> GpuScene<'g> {
@@ -432,7 +434,9 @@ impl<'g> GpuScene<'g> {
             if entries > u64::from(MAX_ENTRIES) {
                 return Err(too_big(&gpu.info, "the tile lists of this scene"));
             }
-            GpuScene::with_lists(gpu, forward, uniform, entries.max(1) as u32)
+            let mut s = GpuScene::with_lists(gpu, forward, uniform, entries.max(1) as u32)?;
+            s.tone = scene.tone.clone();
+            Ok(s)
         })
     }
 
@@ -452,6 +456,7 @@ impl<'g> GpuScene<'g> {
             height: uniform.height,
             forward,
             lists,
+            tone: None,
         })
     }
 
@@ -480,16 +485,21 @@ impl<'g> GpuScene<'g> {
         self.gpu.wait(None)
     }
 
-    /// Draw once more and read the image back.
+    /// Draw once more and read the image back, through the scene's tone curve where it
+    /// has one (applied on the CPU: [`GpuScene::draw`] times the blending alone).
     pub fn image(&self) -> Result<RgbImage> {
         let [bytes] = self
             .gpu
             .checked(|| self.gpu.read_back(self.frame(), [&self.forward.image]))?;
         let n = self.width as usize * self.height as usize * 3;
+        let mut data = bytemuck::cast_slice::<u8, f32>(&bytes)[..n].to_vec();
+        if let Some(t) = &self.tone {
+            t.apply(&mut data);
+        }
         Ok(RgbImage {
             width: self.width,
             height: self.height,
-            data: bytemuck::cast_slice::<u8, f32>(&bytes)[..n].to_vec(),
+            data,
         })
     }
 }

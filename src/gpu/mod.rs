@@ -355,7 +355,8 @@ impl Gpu {
     }
 
     /// Render `scene` at `width × height`: the same pixels as [`crate::render::render`],
-    /// within the rounding of `exp`.
+    /// within the rounding of `exp`. The scene's tone curve (spec §6.6) is applied on the
+    /// CPU to what the GPU blended, so it adds no difference of its own.
     pub fn render(&self, scene: &Scene, width: u32, height: u32) -> Result<RgbImage> {
         // Before projecting: a zero or oversized output is refused, not projected for.
         Limits::default().check_output(width, height)?;
@@ -365,12 +366,16 @@ impl Gpu {
                 "inconsistent Gaussian set",
             ));
         }
-        self.render_projected(
+        let mut image = self.render_projected(
             &project_scene(scene, width, height),
             scene.blend,
             width,
             height,
-        )
+        )?;
+        if let Some(t) = &scene.tone {
+            t.apply(&mut image.data);
+        }
+        Ok(image)
     }
 
     /// [`Gpu::render`] of Gaussians already projected for this size (the fitter projects

@@ -53,6 +53,78 @@ pub fn gt_mean(reference: Rgb8<'_>, image: Rgb8<'_>) -> Result<Vec<u8>, MetricEr
         .collect())
 }
 
+/// Side of the blocks [`flat_noise`] looks at, in pixels.
+pub const FLAT_BLOCK: u32 = 16;
+/// A block of the reference whose luma varies less than this (standard deviation, 8-bit
+/// steps) counts as flat.
+pub const FLAT_MAX_STD: f64 = 1.5;
+/// Flat blocks darker than this mean luma (8-bit) are left out: in a dark reference
+/// a flat block is often flat because it is black.
+const FLAT_MIN_MEAN: f64 = 20.0;
+
+/// Noise on flat surfaces: the median, over the `FLAT_BLOCK`-pixel blocks where the
+/// reference is flat (luma standard deviation below [`FLAT_MAX_STD`], mean luma at least
+/// 20), of the image's luma standard deviation in that block, in 8-bit steps. `None`
+/// where the reference has no flat block. A low-light enhancement that lifts sensor
+/// noise with the signal shows it here: a wall that is flat in the reference is grainy
+/// or blotchy in the output.
+pub fn flat_noise(reference: Rgb8<'_>, image: Rgb8<'_>) -> Result<Option<f64>, MetricError> {
+    check_pair(reference, image)?;
+    let (w, h) = (reference.width as usize, reference.height as usize);
+    let (r, o) = (luma(reference), luma(image));
+    let b = FLAT_BLOCK as usize;
+    let stats = |v: &[f64], x0: usize, y0: usize| {
+        let (mut s, mut s2) = (0.0, 0.0);
+        for y in y0..y0 + b {
+            for x in x0..x0 + b {
+                let p = v[y * w + x];
+                s += p;
+                s2 += p * p;
+            }
+        }
+        let n = (b * b) as f64;
+        let m = s / n;
+        (m, (s2 / n - m * m).max(0.0).sqrt())
+    };
+    let mut found = Vec::new();
+    for y0 in (0..h.saturating_sub(b - 1)).step_by(b) {
+        for x0 in (0..w.saturating_sub(b - 1)).step_by(b) {
+            let (m, sd) = stats(&r, x0, y0);
+            if sd < FLAT_MAX_STD && m >= FLAT_MIN_MEAN {
+                found.push(stats(&o, x0, y0).1);
+            }
+        }
+    }
+    if found.is_empty() {
+        return Ok(None);
+    }
+    found.sort_by(f64::total_cmp);
+    let k = found.len() / 2;
+    Ok(Some(if found.len() % 2 == 1 {
+        found[k]
+    } else {
+        0.5 * (found[k - 1] + found[k])
+    }))
+}
+
+/// A channel value from which a pixel counts as clipped.
+pub const CLIPPED_FROM: u8 = 250;
+
+/// The share of pixels, in `[0, 1]`, with any channel at [`CLIPPED_FROM`] or above:
+/// highlights a brightening burnt out.
+pub fn clipped_share(image: Rgb8<'_>) -> f64 {
+    let n = image.data.len() / 3;
+    if n == 0 {
+        return 0.0;
+    }
+    let clipped = image
+        .data
+        .chunks_exact(3)
+        .filter(|p| p.iter().any(|&v| v >= CLIPPED_FROM))
+        .count();
+    clipped as f64 / n as f64
+}
+
 /// Discrete entropy, in bits, of the 256-bin histogram of the luma rounded to 8 bits
 /// (half to even). At most 8; 0 for a flat image.
 pub fn de(image: Rgb8<'_>) -> f64 {

@@ -15,6 +15,9 @@
 //! * GT-mean: the image scaled so its mean luma equals the reference's ([`gt_mean`]).
 //! * LOE, DE, EME: see [`loe`], [`de`], [`eme`].
 //! * NIQE: LIVE's MATLAB release and pristine model, 96×96 patches ([`niqe`]).
+//! * Colour cast: mean CIELAB `a*`, `b*` against the reference's ([`color_cast`]); noise
+//!   on the reference's flat patches ([`flat_noise`]); the share of clipped pixels
+//!   ([`clipped_share`]).
 //!
 //! A differentiable SSIM / MS-SSIM loss on `f32` images for the encoder lives beside them
 //! ([`ssim_loss_grad`], [`ms_ssim_loss_grad`]); it shares the window and the per-scale
@@ -22,6 +25,7 @@
 //!
 //! This module has no dependencies and is part of the lean decoder build.
 
+mod color;
 mod enhancement;
 mod filter;
 mod loss;
@@ -29,7 +33,11 @@ mod niqe;
 mod psnr;
 mod ssim;
 
-pub use enhancement::{de, eme, gt_mean, loe, luma, EME_BLOCK, EME_EPS, LOE_ROWS};
+pub use color::{color_cast, linear_to_srgb, mean_ab, srgb_to_linear};
+pub use enhancement::{
+    clipped_share, de, eme, flat_noise, gt_mean, loe, luma, CLIPPED_FROM, EME_BLOCK, EME_EPS,
+    FLAT_BLOCK, FLAT_MAX_STD, LOE_ROWS,
+};
 pub use filter::Real;
 pub use loss::{ms_ssim_loss_grad, ssim_loss_grad, LossWorkspace};
 pub use niqe::{niqe, NIQE_PATCH};

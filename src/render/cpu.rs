@@ -11,7 +11,7 @@ use super::project::{Projected, Rect};
 use super::tiles::{runs, Bins, Span};
 use super::TILE;
 use crate::contract::{ALPHA_MAX, ALPHA_MIN, TRANSMITTANCE_MIN};
-use crate::model::Blend;
+use crate::model::{Blend, ToneCurve};
 use std::ops::Range;
 
 /// Most entries of the per-band lists binned at once (64 MiB of indices).
@@ -92,17 +92,17 @@ impl Output for RgbF32Bytes {
 }
 
 /// Render projected Gaussians (in stored order) into `out`, `width * height` pixels of
-/// `O`'s layout.
+/// `O`'s layout, every blended value through `tone` where there is one (spec §6.6).
 pub(crate) fn render_projected<O: Output>(
     proj: &[Projected],
     blend: Blend,
-    width: u32,
-    height: u32,
+    tone: Option<&ToneCurve>,
+    (width, height): (u32, u32),
     out: &mut [O::Elem],
     parallel: bool,
 ) {
     let budgets = (BAND_BUDGET, TILE_BUDGET);
-    render_budgeted::<O>(proj, blend, width, height, out, parallel, budgets);
+    render_budgeted::<O>(proj, blend, tone, (width, height), out, parallel, budgets);
 }
 
 /// [`render_projected`] with explicit binning budgets `(bands, tiles)`, so that tests can
@@ -110,8 +110,8 @@ pub(crate) fn render_projected<O: Output>(
 fn render_budgeted<O: Output>(
     proj: &[Projected],
     blend: Blend,
-    width: u32,
-    height: u32,
+    tone: Option<&ToneCurve>,
+    (width, height): (u32, u32),
     out: &mut [O::Elem],
     parallel: bool,
     (band_budget, tile_budget): (u64, u64),
@@ -143,7 +143,12 @@ fn render_budgeted<O: Output>(
                 tile_budget,
             };
             let Scratch { tiles, band: rgb } = scratch;
-            O::band(rows, rgb, |px| ctx.render(bands.slot(band), px, tiles));
+            O::band(rows, rgb, |px| {
+                ctx.render(bands.slot(band), px, tiles);
+                if let Some(t) = tone {
+                    t.apply(px);
+                }
+            });
         };
         #[cfg(feature = "parallel")]
         if parallel {
@@ -348,8 +353,8 @@ mod tests {
         let proj = project_scene(&scene, w, h);
         let mut seq = vec![f32::NAN; (w * h * 3) as usize];
         let mut par = vec![f32::NAN; (w * h * 3) as usize];
-        render_projected::<RgbF32>(&proj, blend, w, h, &mut seq, false);
-        render_projected::<RgbF32>(&proj, blend, w, h, &mut par, true);
+        render_projected::<RgbF32>(&proj, blend, None, (w, h), &mut seq, false);
+        render_projected::<RgbF32>(&proj, blend, None, (w, h), &mut par, true);
         (seq, par)
     }
 
@@ -382,13 +387,13 @@ mod tests {
             render_budgeted::<RgbF32>(
                 &proj,
                 blend,
-                w,
-                h,
+                None,
+                (w, h),
                 &mut a,
                 false,
                 (BAND_BUDGET, TILE_BUDGET),
             );
-            render_budgeted::<RgbF32>(&proj, blend, w, h, &mut b, false, (0, 0));
+            render_budgeted::<RgbF32>(&proj, blend, None, (w, h), &mut b, false, (0, 0));
             assert!(a.iter().any(|&x| x != 0.0));
             assert!(
                 a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits()),

@@ -12,9 +12,11 @@
 //!   visits (those whose pixel box holds it), never in what order, so the tiled result
 //!   is bit-identical to a naive loop over all Gaussians for every pixel.
 //!
-//! The output is linear in the stored (sRGB-encoded) colour values and is not clamped:
-//! `sum` blending may overshoot `[0, 1]`, and a caller that post-processes (enhancement,
-//! metrics) wants to see that. [`RgbImage::to_rgb8`] is where clamping happens.
+//! Without a tone curve the output is linear in the stored (sRGB-encoded) colour values
+//! and is not clamped: `sum` blending may overshoot `[0, 1]`, and a caller that
+//! post-processes (enhancement, metrics) wants to see that. [`RgbImage::to_rgb8`] is
+//! where clamping happens. A scene with a tone curve (spec §6.6, written by stage 2)
+//! shows every blended value through it, in `[0, 1]`.
 
 mod cpu;
 mod project;
@@ -170,7 +172,15 @@ fn render_as<O: cpu::Output>(
     }
     let projected = project_scene(scene, width, height);
     let parallel = cfg!(feature = "parallel");
-    cpu::render_projected::<O>(&projected, scene.blend, width, height, out, parallel);
+    let tone = scene.tone.as_ref();
+    cpu::render_projected::<O>(
+        &projected,
+        scene.blend,
+        tone,
+        (width, height),
+        out,
+        parallel,
+    );
     Ok(())
 }
 

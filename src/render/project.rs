@@ -211,6 +211,7 @@ mod tests {
 
     fn one(pos: [f32; 2], cov: [f32; 3], opacity: Option<f32>) -> Scene {
         Scene {
+            tone: None,
             width: 10,
             height: 10,
             blend: Blend::Sum,

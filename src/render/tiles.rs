@@ -269,6 +269,7 @@ mod tests {
             g.colors.push([t, 1.0 - t, 0.5]);
         }
         let scene = Scene {
+            tone: None,
             width: w,
             height: h,
             blend: Blend::Alpha,

@@ -2,7 +2,7 @@
 //! and the `lowlight_set` example: see that example for what it is and how it was matched
 //! to LOL.
 
-use gsi::enhance::exposure::{linear_to_srgb, srgb_to_linear};
+use gsi::metrics::{linear_to_srgb, srgb_to_linear};
 use std::path::{Path, PathBuf};
 
 /// eval15's low images: mean Rec. 601 luma (of the 8-bit values, `[0, 1]`) between 0.025
@@ -256,13 +256,16 @@ pub fn rules(kodak: &Path, set: &Path) {
         let (la, med, p99) = stats(&lin_luma_blocks(w, h, &rgb));
         let img: Vec<f32> = rgb.iter().map(|&v| f32::from(v) / 255.0).collect();
         let m = gsi::enhance::exposure::meter(&img);
+        let (w_, h_) = (w as usize, h as usize);
+        let a = gsi::enhance::assess::assess_image(&img, w_, h_);
         println!(
-            "{} own {:.3} metered {:.3} gain {:.2} low-light {}",
+            "{} own {:.3} metered {:.3} gain {:.2} under-exposed {:.0}% low-light {}",
             p.file_name().unwrap().to_string_lossy(),
             m.own,
             m.target,
             m.gain,
-            m.is_low_light()
+            100.0 * a.dark_share,
+            a.is_low_light()
         );
         k.0.push(la);
         k.1.push(med);
