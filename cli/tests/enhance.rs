@@ -250,7 +250,7 @@ fn a_lamp_lit_room_gets_a_gain_map_that_applies_and_reverts_exactly() {
             gsi::enhance::fit::mean_luma(&gsi::render::render(&scene, 64, 48).unwrap().data);
         assert!(
             (shown - done.mean_luma.1).abs() < 0.03,
-            "{shown} vs {:?}",
+            "{blend:?}: {shown} vs {:?}",
             done.mean_luma
         );
         let again = enhance::apply_from(&parse(&before), &after, true, &lim).unwrap();

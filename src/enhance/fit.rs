@@ -19,12 +19,12 @@ use crate::optim::FlatAdam;
 use crate::rng::SplitMix64;
 
 /// How an enhancer is fitted. The defaults are the paper's where it gives them (K = 16,
-/// the loss weights) and measured choices elsewhere (the mixture's E = 0.5, the learning
-/// rate, the sizes, 100 iterations; see BENCHMARKS.md). Since the tone curve sets the
-/// exposure ([`super::curve`]), the mixture shapes what the curve shows and no longer
-/// decides how bright it is: 100 iterations scored as 400 did on the validation pairs
-/// (LOL `val30` 20.17 against 20.21 dB, the synthetic Kodak set 21.57 against 21.38) in
-/// a quarter of the time.
+/// the loss weights) and measured choices elsewhere (E = 0.5 for a fit without a tone
+/// curve, the learning rate, the sizes, 100 iterations; see BENCHMARKS.md). With the tone
+/// curve ([`super::curve`]) the curve sets the exposure, [`super::enhance`] fits the
+/// mixture at the image's own level, and 100 iterations scored as 400 did on the
+/// validation pairs (LOL `val30` 20.17 against 20.21 dB, the synthetic Kodak set 21.57
+/// against 21.38) in a quarter of the time.
 #[derive(Clone, Debug)]
 pub struct EnhanceOptions {
     pub iterations: u32,
