@@ -170,10 +170,13 @@ impl Reader {
                 ),
             ));
         }
+        let (scene, limits) = (&self.scene, &self.limits);
         match self.format {
-            PixelFormat::Rgb8 => render::render_rgb8_into(&self.scene, w, h, buf),
-            PixelFormat::Rgba8 => render::render_rgba8_into(&self.scene, w, h, buf),
-            PixelFormat::RgbF32 => render::render_f32_bytes_into(&self.scene, w, h, buf),
+            PixelFormat::Rgb8 => render::render_as::<render::Rgb8Out>(scene, w, h, buf, limits),
+            PixelFormat::Rgba8 => render::render_as::<render::Rgba8Out>(scene, w, h, buf, limits),
+            PixelFormat::RgbF32 => {
+                render::render_as::<render::RgbF32BytesOut>(scene, w, h, buf, limits)
+            }
         }
     }
 }

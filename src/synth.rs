@@ -352,6 +352,10 @@ mod corpus {
             seed: 77,
         };
         let mut record = e.to_record(fit);
+        // The map at the full MAP_BITS, as written before the logits were kept to a
+        // step: the checked-in files of that time stay what they were.
+        let map: Vec<[f32; 1]> = e.map.iter().map(|&x| [x]).collect();
+        record.map = format::Attribute::fit(&map, [crate::enhance::mixture::MAP_BITS]);
         record.denoise = denoised.then_some(format::Denoise {
             range: 0.05,
             strength: 1.0,

@@ -99,3 +99,38 @@ fn generator_reproduces_the_checked_in_corpus() {
         }
     }
 }
+
+/// Every enhanced file of the corpus, of every `gENH` layout (1 to 4, with and without a
+/// `GTRC`), applies its own enhancer to its original colours byte for byte, and reverts
+/// to a file without stage 2's chunks.
+#[test]
+fn enhanced_files_reapply_and_revert_exactly() {
+    use gsi::format::{ChunkType, ChunkedFile};
+    let mut layouts = std::collections::BTreeSet::new();
+    for entry in std::fs::read_dir(corpus_dir("valid")).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_none_or(|e| e != "gsi") {
+            continue;
+        }
+        let bytes = std::fs::read(&path).unwrap();
+        let file = ChunkedFile::parse(&bytes, Limits::default()).unwrap();
+        let Some(genh) = file.chunks.iter().find(|c| c.ty == ChunkType::ENHANCER) else {
+            continue;
+        };
+        layouts.insert(genh.data[0]);
+        let again = gsi::enhance::apply_from(&file, &file, true, &Limits::default()).unwrap();
+        assert_eq!(again, bytes, "{}", path.display());
+        let reverted = ChunkedFile::parse(&file.revert().unwrap(), Limits::default()).unwrap();
+        assert!(
+            reverted.chunks.iter().all(|c| ![
+                ChunkType::ENHANCER,
+                ChunkType::ORIGINAL_COLORS,
+                ChunkType::TONE_CURVE
+            ]
+            .contains(&c.ty)),
+            "{}",
+            path.display()
+        );
+    }
+    assert_eq!(layouts.into_iter().collect::<Vec<_>>(), [1, 2, 3, 4]);
+}

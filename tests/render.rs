@@ -3,7 +3,7 @@
 //! `naive` below is the contract transcribed as directly as possible: every pixel visits
 //! every Gaussian, in stored order, in `f32`. The tiled renderer must match it bit for bit.
 
-use gsi::format::ErrorKind;
+use gsi::format::{ErrorKind, Limits};
 use gsi::model::{Blend, CovParam, GaussianSet, Scene};
 use gsi::render::{render, render_into, RgbImage};
 use gsi::synth::{random_scene, SceneSpec};
@@ -421,4 +421,60 @@ fn to_rgb8_clamps_then_rounds_half_up() {
         img.to_rgba8(),
         vec![0, 0, 64, 255, 128, 255, 255, 255, 127, 1, 1, 255, 0, 0, 255, 255]
     );
+}
+
+/// `r` refused for asking too much rendering work (its `Ok` value is never printed: an
+/// image of 300×300 would flood the report).
+fn refused<T>(r: Result<T, gsi::Error>) {
+    match r {
+        Ok(_) => panic!("rendered past the work limit"),
+        Err(e) => {
+            assert_eq!(e.kind(), gsi::ErrorKind::LimitExceeded, "{e}");
+            assert!(e.to_string().contains("Gaussian-pixel pairs"), "{e}");
+        }
+    }
+}
+
+/// A valid 176-byte file (GHDR 8×8, 59,136 Gaussians at 0-bit depths: every Gaussian the
+/// same, covering the image) asks for 59,136 Gaussian–pixel pairs per output pixel. At
+/// its own size it renders; at 300×300 and 1000×1000 it is refused by the render-work
+/// limit, before any pixel, through every decoding entry point.
+#[test]
+fn a_tiny_file_cannot_ask_for_hours_of_rendering() {
+    let bytes = std::fs::read(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/corpus/valid/fuzz-decode-render-work.gsi"
+    ))
+    .unwrap();
+    assert_eq!(bytes.len(), 176);
+    let scene = gsi::format::read_file(&bytes[..], Limits::default())
+        .unwrap()
+        .records
+        .to_scene();
+    assert_eq!(scene.gaussians.len(), 59_136);
+    gsi::decode(&bytes[..], 8, 8).unwrap();
+    for side in [300, 1000] {
+        let t = std::time::Instant::now();
+        refused(gsi::decode(&bytes[..], side, side));
+        refused(gsi::render::render(&scene, side, side));
+        let mut buf = vec![0u8; (side * side * 3) as usize];
+        refused(gsi::render::render_rgb8_into(&scene, side, side, &mut buf));
+        let mut reader = gsi::Reader::new(&bytes[..]).unwrap();
+        reader.set_output_size(side, side).unwrap();
+        let mut buf = vec![0u8; reader.output_buffer_size().unwrap()];
+        refused(reader.read_image(&mut buf));
+        assert!(t.elapsed().as_secs_f64() < 2.0, "{:?}", t.elapsed());
+    }
+    // A caller who trusts the file can raise the bound.
+    let mut reader = gsi::Reader::with_limits(
+        &bytes[..],
+        Limits {
+            max_render_work: u64::MAX,
+            ..Limits::default()
+        },
+    )
+    .unwrap();
+    reader.set_output_size(20, 20).unwrap();
+    let mut buf = vec![0u8; reader.output_buffer_size().unwrap()];
+    reader.read_image(&mut buf).unwrap();
 }

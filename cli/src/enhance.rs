@@ -66,10 +66,14 @@ pub struct Args {
     /// Do not keep the original colours (smaller file; --revert becomes impossible).
     #[arg(long, conflicts_with = "revert")]
     discard_original: bool,
-    /// Leave the noise alone: by default the colours are first smoothed across
-    /// neighbouring Gaussians of like size and value (an edge-preserving average; format
-    /// spec §7.2.1), since brightening multiplies a dark image's sensor noise.
-    #[arg(long)]
+    /// Smooth the colours across neighbouring Gaussians of like size and value first (an
+    /// edge-preserving average; format spec §7.2.1). Off by default: the tone curve keeps
+    /// the noise of the shadows down, and on the validation pairs the smoothing cost
+    /// 0.2–0.4 dB for a little less grain on flat surfaces.
+    #[arg(long, conflicts_with = "no_denoise")]
+    denoise: bool,
+    /// No denoising: the default (kept so that older command lines still run).
+    #[arg(long, hide = true)]
     no_denoise: bool,
     /// Power of the tone curve the result is shown through (format spec §6.6): below 1
     /// lifts shadows more than highlights, as a camera's curve does between a short
@@ -339,11 +343,9 @@ fn options(args: &Args) -> Result<EnhanceOptions, Failure> {
         experts: args.experts,
         seed: args.seed,
         force: args.force,
-        denoise: if args.no_denoise {
-            None
-        } else {
-            defaults.denoise
-        },
+        denoise: args
+            .denoise
+            .then(gsi::enhance::denoise::DenoiseOptions::default),
         curve: Some(CurveOptions {
             exponent: args.tone,
             local: !args.no_local,

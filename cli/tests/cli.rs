@@ -870,3 +870,32 @@ fn batches_of_files_in_one_call() {
     assert!(!Path::new("-").exists());
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+/// A valid 176-byte file that asks for billions of Gaussian–pixel pairs at 300×300 is
+/// refused in one line, quickly, with exit 1 and no output written.
+#[test]
+fn a_render_past_the_work_limit_is_refused() {
+    let dir = tmp_dir("render-work");
+    let file = corpus("valid")
+        .into_iter()
+        .find(|p| p.ends_with("fuzz-decode-render-work.gsi"))
+        .expect("the corpus file");
+    let out_png = dir.join("x.png");
+    let t = std::time::Instant::now();
+    let out = gsi(&[
+        "decode",
+        file.to_str().unwrap(),
+        "-o",
+        out_png.to_str().unwrap(),
+        "--width",
+        "300",
+        "--height",
+        "300",
+        "--device",
+        "cpu",
+    ]);
+    assert_refused(&out, "render work");
+    assert!(String::from_utf8_lossy(&out.stderr).contains("Gaussian-pixel pairs"));
+    assert!(t.elapsed().as_secs_f64() < 5.0, "{:?}", t.elapsed());
+    assert!(!out_png.exists());
+}

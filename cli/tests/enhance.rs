@@ -40,6 +40,14 @@ fn quick() -> EnhanceOptions {
     }
 }
 
+/// [`quick`] with the denoising that runs before the mixture (off by default).
+fn denoised() -> EnhanceOptions {
+    EnhanceOptions {
+        denoise: Some(gsi::enhance::denoise::DenoiseOptions::default()),
+        ..quick()
+    }
+}
+
 fn parse(bytes: &[u8]) -> ChunkedFile {
     ChunkedFile::parse(bytes, Limits::default()).unwrap()
 }
@@ -150,10 +158,10 @@ fn apply_from_reproduces_the_fitted_colours() {
 
 fn apply_from_reproduces(blend: Blend) {
     let before = dark_file(3, 70, blend, 0.2);
-    let after = enhanced(&before, true);
     let lim = Limits::default();
-    // The default enhancer denoises first and tones last (gENH layout 3, both records),
-    // so this covers all three steps.
+    // Denoised first (gENH layout 2), then the mixture, then shown through GTRC: every
+    // step an enhancer of this blend mode takes.
+    let after = run(&before, &denoised(), true, &lim).bytes;
     let record = parse(&after).enhancer(&lim).unwrap().unwrap();
     assert!(record.denoise.is_some(), "{blend:?}: no denoising stored");
     let file = parse(&after);
@@ -190,7 +198,7 @@ fn too_much_overlap_for_denoising_is_enhanced_without_it() {
         max_alloc: 8 * 50_000,
         ..Limits::default()
     };
-    let done = run(&before, &quick(), true, &tight);
+    let done = run(&before, &denoised(), true, &tight);
     let fitted = done.fitted;
     assert!(fitted.record.denoise.is_none());
     let why = fitted.denoise_skipped.expect("the skip is reported");
@@ -200,8 +208,11 @@ fn too_much_overlap_for_denoising_is_enhanced_without_it() {
     // The tone curve needs no neighbour search: it is there either way.
     assert!(file.file.records.tone.is_some());
     // With the default limits the same file is denoised.
-    let fitted = run(&before, &quick(), true, &Limits::default()).fitted;
+    let fitted = run(&before, &denoised(), true, &Limits::default()).fitted;
     assert!(fitted.record.denoise.is_some() && fitted.denoise_skipped.is_none());
+    // By default nothing is denoised, and nothing is skipped.
+    let fitted = run(&before, &quick(), true, &Limits::default()).fitted;
+    assert!(fitted.record.denoise.is_none() && fitted.denoise_skipped.is_none());
 }
 
 /// A dark room lit by a lamp: a dark scene whose left fifth is bright.
@@ -419,7 +430,15 @@ fn cli_in_place_revert_and_apply_from() {
     let path = tmp("frame.gsi");
     std::fs::write(&path, &before).unwrap();
     let p = path.to_str().unwrap();
-    let out = gsi(&["enhance", p, "--in-place", "--iterations", "30", "--quiet"]);
+    let out = gsi(&[
+        "enhance",
+        p,
+        "--in-place",
+        "--iterations",
+        "30",
+        "--denoise",
+        "--quiet",
+    ]);
     assert!(
         out.status.success(),
         "{}",
@@ -671,4 +690,77 @@ fn cli_a_bright_file_through_pipes_comes_back_unchanged() {
     assert!(out.status.success(), "{err}");
     assert!(err.contains("not a low-light image"), "{err}");
     assert!(out.stdout == bright, "the file did not come back unchanged");
+}
+
+/// Bad and degenerate inputs: a 1×1 image and a black one are enhanced; a white one is
+/// left alone with the reason; a file without colour records, and an enhanced file
+/// whose original colours were discarded, are refused in one line with exit 1 and the
+/// file left as it was.
+#[test]
+fn cli_bad_and_degenerate_inputs() {
+    let write = |name: &str, bytes: &[u8]| {
+        let p = tmp(name);
+        std::fs::write(&p, bytes).unwrap();
+        p
+    };
+    let tiny = {
+        let scene = random_scene(40, SceneSpec::new(1, 1, 1, Blend::Sum));
+        let mut r = Records::from_scene(&scene, BITS);
+        r.colors = gsi::format::Attribute::fit(&[[0.01f32, 0.02, 0.01]], [8; 3]);
+        to_bytes(&r, &WriteOptions::default()).unwrap()
+    };
+    for (name, bytes) in [
+        ("one-pixel.gsi", tiny),
+        ("black.gsi", dark_file(41, 30, Blend::Sum, 0.0)),
+    ] {
+        let p = write(name, &bytes);
+        let out = gsi(&[
+            "enhance",
+            p.to_str().unwrap(),
+            "--in-place",
+            "--iterations",
+            "5",
+        ]);
+        assert!(
+            out.status.success(),
+            "{name}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert_sane(&std::fs::read(&p).unwrap());
+    }
+    let white = write("white.gsi", &dark_file(42, 200, Blend::Sum, 4.0));
+    let out = gsi(&["enhance", white.to_str().unwrap(), "--in-place"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success() && err.contains("0% of the image is under-exposed"),
+        "{err}"
+    );
+    assert!(err.contains("left unchanged"), "{err}");
+
+    // No GCOL: refused by the parser, named, nothing written.
+    let good = dark_file(43, 30, Blend::Sum, 0.1);
+    let f = parse(&good);
+    let mut no_colours = gsi::format::SIGNATURE.to_vec();
+    for c in f.chunks.iter().filter(|c| c.ty != ChunkType::COLORS) {
+        no_colours.extend_from_slice(&(c.data.len() as u32).to_be_bytes());
+        no_colours.extend_from_slice(&c.ty.0);
+        no_colours.extend_from_slice(&c.data);
+        no_colours.extend_from_slice(&gsi::format::chunk_crc(c.ty, &c.data).to_be_bytes());
+    }
+    let p = write("no-colours.gsi", &no_colours);
+    let out = gsi(&["enhance", p.to_str().unwrap(), "--in-place"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(err.contains("GCOL"), "{err}");
+    assert_eq!(std::fs::read(&p).unwrap(), no_colours);
+
+    // Enhanced, original discarded: refused unless --force.
+    let p = write("discarded.gsi", &enhanced(&good, false));
+    let before = std::fs::read(&p).unwrap();
+    let out = gsi(&["enhance", p.to_str().unwrap(), "--in-place"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("original colours were discarded"), "{err}");
+    assert_eq!(std::fs::read(&p).unwrap(), before);
 }

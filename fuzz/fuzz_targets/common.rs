@@ -19,6 +19,9 @@ pub fn limits() -> Limits {
         max_decompressed: 16 << 20,
         max_alloc: 64 << 20,
         max_output_pixels: 1 << 20,
+        // Far below the default (2^33): every accepted render must finish well within
+        // the smoke run's per-input timeout, sanitizers and three renders included.
+        max_render_work: 1 << 24,
     }
 }
 

@@ -1,6 +1,7 @@
 //! Bytes to pixels: the first two bytes choose an output size of 1..=64 × 1..=64, the
-//! rest is a file. Whatever the file holds, a render that the limits allow succeeds and
-//! gives finite values, and (for small enough scenes) the tiled renderer agrees bit for
+//! rest is a file. Whatever the file holds, a render that the limits allow (its size,
+//! and its Gaussian–pixel pairs, `Limits::max_render_work`) succeeds and gives finite
+//! values, and (for small enough scenes) the tiled renderer agrees bit for
 //! bit with a plain per-pixel loop written from `format-spec.md` §6.3-6.4. The 8-bit
 //! outputs rendered straight into a caller's buffer (RGB and RGBA, as `gsi::Reader` and
 //! `gsi decode` use them) equal the float image converted afterwards.
@@ -28,6 +29,15 @@ fuzz_target!(|data: &[u8]| {
         .expect("1..=64 squared is within the limits");
 
     let scene = file.records.to_scene();
+    // A file may ask for more work than the limits allow (a few bytes can declare
+    // thousands of image-sized Gaussians): refused by the count alone, before a pixel.
+    let work = gsi::render::render_work(&project_scene(&scene, width, height));
+    if common::limits()
+        .check_render_work(work, width, height)
+        .is_err()
+    {
+        return;
+    }
     let image = render(&scene, width, height).expect("rendering a valid file");
     assert_eq!((image.width, image.height), (width, height));
     assert_eq!(image.data.len(), (width * height * 3) as usize);

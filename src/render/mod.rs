@@ -22,6 +22,9 @@ mod cpu;
 mod project;
 mod tiles;
 
+/// The output layouts [`render_as`] writes, for the decoder API's own limits.
+pub(crate) use cpu::{Rgb8 as Rgb8Out, RgbF32Bytes as RgbF32BytesOut, Rgba8 as Rgba8Out};
+
 #[cfg(feature = "encode")]
 pub(crate) use project::Rect;
 pub use project::{project, project_scene, PixelBox, Projected};
@@ -75,17 +78,19 @@ pub(crate) fn to_u8(c: f32) -> u8 {
 ///
 /// Any output size is allowed: geometry is normalized, so another size samples the same
 /// continuous image at other pixel centres. Refused: an empty size
-/// ([`ErrorKind::InvalidValue`]), or one over the default [`Limits`]' `max_output_pixels`
-/// or `max_alloc` for the `width·height·12` bytes this allocates
-/// ([`ErrorKind::LimitExceeded`]) — the bounds the GPU renderer applies too. To render
-/// with other limits, or into 8 bits without the `f32` image, use [`crate::Reader`] or
-/// the `render_*_into` functions with a buffer of your own.
+/// ([`ErrorKind::InvalidValue`]), or one over the default [`Limits`]' `max_output_pixels`,
+/// `max_alloc` for the `width·height·12` bytes this allocates, or `max_render_work`
+/// for the Gaussian–pixel pairs it would evaluate ([`ErrorKind::LimitExceeded`]) — the
+/// bounds the GPU renderer applies too. To render with other limits, or into 8 bits
+/// without the `f32` image, use [`crate::Reader`] or the `render_*_into` functions with a
+/// buffer of your own (which apply the default limits' work bound).
 ///
 /// With the `parallel` feature, tile rows are spread over rayon's pool; the result is
 /// bit-identical to the sequential build.
 pub fn render(scene: &Scene, width: u32, height: u32) -> Result<RgbImage> {
-    let mut data = allocate(width, height, 3, 4, &Limits::default())?;
-    render_into(scene, width, height, &mut data)?;
+    let limits = Limits::default();
+    let mut data = allocate(width, height, 3, 4, &limits)?;
+    render_as::<cpu::RgbF32>(scene, width, height, &mut data, &limits)?;
     Ok(RgbImage {
         width,
         height,
@@ -98,7 +103,7 @@ pub fn render(scene: &Scene, width: u32, height: u32) -> Result<RgbImage> {
 /// output's pixels, and its `width·height·3` bytes against `max_alloc`.
 pub fn render_rgb8(scene: &Scene, width: u32, height: u32, limits: &Limits) -> Result<Vec<u8>> {
     let mut rgb = allocate(width, height, 3, 1, limits)?;
-    render_rgb8_into(scene, width, height, &mut rgb)?;
+    render_as::<cpu::Rgb8>(scene, width, height, &mut rgb, limits)?;
     Ok(rgb)
 }
 
@@ -119,33 +124,46 @@ fn allocate<T: Clone + Default>(
 /// Render into a caller-provided buffer of exactly `width * height * 3` floats
 /// (overwritten, not accumulated into), so that repeated renders reuse one allocation.
 pub fn render_into(scene: &Scene, width: u32, height: u32, out: &mut [f32]) -> Result<()> {
-    render_as::<cpu::RgbF32>(scene, width, height, out)
+    render_as::<cpu::RgbF32>(scene, width, height, out, &Limits::default())
 }
 
 /// Render into a caller's buffer of exactly `width * height * 3` bytes of 8-bit RGB, the
 /// values [`RgbImage::to_rgb8`] gives. Tiles are blended in a band-sized scratch buffer
 /// and written straight into `out`: no whole-image `f32` copy is made.
 pub fn render_rgb8_into(scene: &Scene, width: u32, height: u32, out: &mut [u8]) -> Result<()> {
-    render_as::<cpu::Rgb8>(scene, width, height, out)
+    render_as::<cpu::Rgb8>(scene, width, height, out, &Limits::default())
 }
 
 /// As [`render_rgb8_into`], in 8-bit RGBA (`width * height * 4` bytes, alpha 255).
 pub fn render_rgba8_into(scene: &Scene, width: u32, height: u32, out: &mut [u8]) -> Result<()> {
-    render_as::<cpu::Rgba8>(scene, width, height, out)
+    render_as::<cpu::Rgba8>(scene, width, height, out, &Limits::default())
 }
 
 /// As [`render_into`], with the floats written as native-endian bytes
 /// (`width * height * 12`), for byte-typed buffers.
 pub fn render_f32_bytes_into(scene: &Scene, width: u32, height: u32, out: &mut [u8]) -> Result<()> {
-    render_as::<cpu::RgbF32Bytes>(scene, width, height, out)
+    render_as::<cpu::RgbF32Bytes>(scene, width, height, out, &Limits::default())
 }
 
-/// Check `scene` and `out`, project, and render in `O`'s layout.
-fn render_as<O: cpu::Output>(
+/// The Gaussian–pixel pairs a render of `proj` evaluates at most: the pixels of every
+/// Gaussian's box (already cut to the output), summed, saturating.
+pub fn render_work(proj: &[Projected]) -> u64 {
+    proj.iter()
+        .map(|p| {
+            let b = &p.bbox;
+            u64::from(b.x1 - b.x0 + 1) * u64::from(b.y1 - b.y0 + 1)
+        })
+        .fold(0u64, u64::saturating_add)
+}
+
+/// Check `scene` and `out`, project, check the work against `limits`, and render in
+/// `O`'s layout.
+pub(crate) fn render_as<O: cpu::Output>(
     scene: &Scene,
     width: u32,
     height: u32,
     out: &mut [O::Elem],
+    limits: &Limits,
 ) -> Result<()> {
     let len = buffer_len(width, height, O::PER_PIXEL, &Limits::unlimited())?;
     if out.len() != len {
@@ -171,6 +189,7 @@ fn render_as<O: cpu::Output>(
         ));
     }
     let projected = project_scene(scene, width, height);
+    limits.check_render_work(render_work(&projected), width, height)?;
     let parallel = cfg!(feature = "parallel");
     let tone = scene.tone.as_ref();
     cpu::render_projected::<O>(

@@ -63,11 +63,11 @@ fn mean_luma(rgb: &[u8], w: u32, h: u32) -> f64 {
     luma.iter().sum::<f64>() / luma.len() as f64 / 255.0
 }
 
-/// Each default turned off in turn, and the metered exposure.
+/// Each default turned the other way in turn, and the metered exposure.
 const VARIANTS: [&str; 4] = [
     "`--tone 1` (no power curve: the exposure only)",
     "`--no-local` (no gain map)",
-    "`--no-denoise`",
+    "`--denoise` (denoised first)",
     "`--exposure auto` (metered)",
 ];
 
@@ -89,7 +89,7 @@ fn variant_options(k: usize, d: &EnhanceOptions) -> EnhanceOptions {
             ..d.clone()
         },
         2 => EnhanceOptions {
-            denoise: None,
+            denoise: Some(gsi::enhance::denoise::DenoiseOptions::default()),
             ..d.clone()
         },
         _ => EnhanceOptions {
