@@ -7,7 +7,7 @@
 use criterion::{criterion_group, criterion_main, Criterion, SamplingMode};
 use gsi::format::{read_file, to_bytes, BitDepths, Limits, Records, WriteOptions};
 use gsi::model::Blend;
-use gsi::render::render_into;
+use gsi::render::{render_into, render_rgb8_into};
 use gsi::synth::{random_scene, SceneSpec};
 use std::hint::black_box;
 use std::time::Duration;
@@ -52,6 +52,26 @@ fn render_cpu(c: &mut Criterion) {
                 })
             });
         }
+    }
+    group.finish();
+}
+
+/// A 12-MP decode into 8-bit RGB (4240×2832, the size of a phone's photograph) of a
+/// 10k-Gaussian scene fitted at 768×512: every Gaussian covers 31 times the pixels.
+fn render_cpu_12mp(c: &mut Criterion) {
+    let mut group = c.benchmark_group("render_cpu_12mp");
+    group
+        .sample_size(10)
+        .warm_up_time(Duration::from_secs(1))
+        .measurement_time(Duration::from_secs(8))
+        .sampling_mode(SamplingMode::Flat);
+    let (w, h) = (4240, 2832);
+    let mut out = vec![0u8; (w * h * 3) as usize];
+    for blend in [Blend::Sum, Blend::Alpha] {
+        let scene = random_scene(2, SceneSpec::new(WIDTH, HEIGHT, 10_000, blend));
+        group.bench_function(format!("{}/10k", blend.name()), |b| {
+            b.iter(|| render_rgb8_into(black_box(&scene), w, h, &mut out).expect("valid size"))
+        });
     }
     group.finish();
 }
@@ -130,6 +150,7 @@ criterion_group!(
     benches,
     parse_dequantize,
     render_cpu,
+    render_cpu_12mp,
     render_gpu,
     decode_files
 );

@@ -2,9 +2,9 @@
 // invocation per pixel, the tile's Gaussians visited in stored order.
 //
 // This is format-spec.md §6.3–6.4, the same per-pixel rule as the CPU renderer
-// (`Projected::alpha_at` and `render::cpu`), evaluated in f32 in the same order. Only
-// `exp` may round differently on a GPU, which is why GPU and CPU agree to 1/255 rather
-// than bit for bit. Projection (covariance clamps, conic, pixel box) and binning come
+// (`Projected::alpha_at` and `render::cpu`), evaluated in f32 in the same order, with the
+// spec's `exp` (`spec_exp`, prepended by the host). A GPU compiler may fuse a product and
+// a sum, which is why GPU and CPU are held to 1/255 rather than to the same bits. Projection (covariance clamps, conic, pixel box) and binning come
 // from the CPU's `render::project` (`Gpu::render`), or from `fit_project.wgsl` and the
 // radix sort (the resident pipeline of `gpu::forward`).
 //
@@ -67,7 +67,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid:
         if (power > 0.0) {
             continue;
         }
-        var alpha = p1.y * exp(power);
+        var alpha = p1.y * spec_exp(power);
         let color = vec3<f32>(p1.z, p1.w, p2.x);
         if (params.blend == 0u) {
             if (alpha < ALPHA_MIN) {

@@ -666,3 +666,51 @@ fn a_tone_curve_changes_every_output_value_as_specified() {
     let image = gsi::decode(&bytes[..], w, h).unwrap();
     assert_eq!(image.data, out.to_rgb8());
 }
+
+/// §6.3.1's table: `E` at each listed `x`, bit for bit, from the spec's own hex (the rows
+/// were computed by a separate binary32 implementation from the spec's text); and the
+/// constants of its code block are the decoder's.
+#[test]
+fn spec_exp_table() {
+    let spec =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/format-spec.md")).unwrap();
+    let section = spec
+        .split("### 6.3.1 The exponential")
+        .nth(1)
+        .expect("spec has §6.3.1")
+        .split("\n### ")
+        .next()
+        .unwrap();
+    let hex =
+        |t: &str| u32::from_str_radix(t.trim().trim_matches('`').trim_start_matches("0x"), 16);
+    use gsi::contract;
+    assert_eq!(contract::EXP_POLY[5], 0.5);
+    let mut rows = 0;
+    for line in section.lines().filter(|l| l.starts_with("| `0x")) {
+        let cells: Vec<&str> = line.split('|').map(str::trim).collect();
+        let x = f32::from_bits(hex(cells[1]).unwrap());
+        let want = hex(cells[3]).unwrap();
+        let got = gsi::contract::exp(x).to_bits();
+        assert_eq!(
+            got, want,
+            "E({x}) = {got:#010x}, the spec says {want:#010x}"
+        );
+        rows += 1;
+    }
+    assert!(rows >= 7, "{rows} rows");
+    // The code block's constants, by their bit patterns, against the ones `exp` uses.
+    for (name, value) in [
+        ("L  = ", contract::EXP_LOG2E),
+        ("H  = ", contract::EXP_LN2_HI),
+        ("K  = ", contract::EXP_LN2_LO),
+        ("P0 = ", contract::EXP_POLY[0]),
+        ("P1 = ", contract::EXP_POLY[1]),
+        ("P2 = ", contract::EXP_POLY[2]),
+        ("P3 = ", contract::EXP_POLY[3]),
+        ("P4 = ", contract::EXP_POLY[4]),
+    ] {
+        let at = section.find(name).unwrap_or_else(|| panic!("{name}")) + name.len();
+        let bits = hex(&section[at..at + 10]).unwrap();
+        assert_eq!(f32::from_bits(bits), value, "{name}");
+    }
+}

@@ -9,6 +9,22 @@ use gsi::render::{render, render_into, RgbImage};
 use gsi::synth::{random_scene, SceneSpec};
 
 /// Reference renderer: a per-pixel loop over all Gaussians, written from the spec alone.
+/// `E` of spec §6.3.1, written from the spec's text alone (constants from their bit
+/// patterns, `round_ties_even` for the rounding the crate does with `1.5·2^23`).
+fn spec_exp(x: f32) -> f32 {
+    let c = f32::from_bits;
+    let x = x.clamp(-87.0, 88.0);
+    let n = (x * c(0x3FB8_AA3B)).round_ties_even();
+    let r = (x - n * c(0x3F31_8000)) - n * c(0xB95E_8083);
+    let mut p = c(0x3950_6967);
+    for k in [0x3AB7_43CE, 0x3C08_8908, 0x3D2A_A9C1, 0x3E2A_AAAA] {
+        p = p * r + c(k);
+    }
+    p = p * r + 0.5;
+    let e = ((p * r) * r + r) + 1.0;
+    e * c(((n as i32 + 127) as u32) << 23)
+}
+
 fn naive(scene: &Scene, w: u32, h: u32) -> Vec<f32> {
     const VAR_MIN: f32 = 1e-4;
     const VAR_MAX: f32 = 1e12;
@@ -70,7 +86,7 @@ fn naive(scene: &Scene, w: u32, h: u32) -> Vec<f32> {
                 if power > 0.0 {
                     continue;
                 }
-                let mut alpha = o * power.exp();
+                let mut alpha = o * spec_exp(power);
                 if scene.blend == Blend::Alpha {
                     alpha = alpha.min(0.99);
                 }

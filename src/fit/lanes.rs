@@ -1,12 +1,9 @@
 //! The `sum` rasterizer's inner loops for fitting, eight pixels of a tile row at a time.
 //!
-//! A fitting step evaluates `alpha = o·exp(power)` for every pixel a Gaussian touches,
-//! and that was three quarters of its time: the decoder's
-//! loops ([`crate::render`]) follow spec §6 one pixel at a time, branch per pixel and call
-//! the platform's `exp`, which keeps them scalar. A fit does not need the decoder's bits,
-//! only its values (the stored file is measured with the decoder at the end), so here a
-//! row of a tile is cut into chunks of [`LANES`] pixels, branches become masks, and `exp`
-//! is a polynomial ([`exp`]) that the compiler can put in SIMD registers.
+//! They walk tiles as the decoder's loops do ([`crate::render::lanes`]: the same
+//! [`Footprint`] culling and masks, the same polynomial `exp` of spec §6.3), and add the
+//! fit's own needs: the alphas a forward pass keeps for its backward pass ([`forward_tile`]'s
+//! `kept`, used by [`super::raster::step_l2_sum`]), and the backward pass itself.
 //!
 //! On x86-64 the loops are compiled a second time, for AVX2 with fused multiply-adds
 //! ([`mla`]), picked at run time where the CPU has both (Intel since 2013, AMD since
@@ -15,228 +12,18 @@
 //! its bits on any CPU (the test checks it), and a fit is the same on every CPU that
 //! runs the same build; between the fused and the unfused build, files differ by
 //! rounding (the PSNR by hundredths of a dB). An encoder promises no more: the decoder's
-//! loops, which define the pixels, stay unfused (spec §6).
-//!
-//! The backward pass can read the alphas its forward pass kept ([`forward_tile`]'s
-//! `kept`, used by [`super::raster::step_l2_sum`]) instead of evaluating them again.
-//!
-//! The masks keep the rule of [`Projected::alpha_at`]: inside the pixel box,
-//! `power <= 0` and above the cut-off, `alpha >= ALPHA_MIN`. Only `exp` differs (by
-//! less than 2e-7 relative), which can move a pixel across `ALPHA_MIN` where the decoder
-//! is exactly on it.
+//! loops, which define the pixels, stay unfused (spec §6), and the unfused build here
+//! gives the decoder's bits.
 
-use crate::contract::ALPHA_MIN;
+use crate::render::lanes::{mla, Footprint, Planes, LANES, V};
 use crate::render::{Projected, Rect, TILE};
 
-/// Pixels per chunk: one AVX register of `f32`, two SSE ones.
-const LANES: usize = 8;
 const TILE_W: usize = TILE as usize;
-/// Pixels of a tile.
-pub(super) const TILE_PIXELS: usize = TILE_W * TILE_W;
-
-type V = [f32; LANES];
-
-/// One tile in three planes (R, G, B), row-major, [`TILE`] pixels a row whatever the
-/// tile's real width.
-#[derive(Clone)]
-pub(super) struct Planes(pub [[f32; TILE_PIXELS]; 3]);
-
-impl Planes {
-    pub fn zero() -> Planes {
-        Planes([[0.0; TILE_PIXELS]; 3])
-    }
-
-    pub fn ones() -> Planes {
-        Planes([[1.0; TILE_PIXELS]; 3])
-    }
-
-    /// The tile `rect` of an interleaved RGB image `width` pixels wide.
-    pub fn gather(image: &[f32], width: u32, rect: Rect) -> Planes {
-        let mut p = Planes::zero();
-        for j in rect.y0..rect.y1 {
-            let row = (j * width) as usize;
-            let l0 = ((j - rect.y0) * TILE) as usize;
-            for (n, i) in (rect.x0..rect.x1).enumerate() {
-                for ch in 0..3 {
-                    p.0[ch][l0 + n] = image[(row + i as usize) * 3 + ch];
-                }
-            }
-        }
-        p
-    }
-
-    /// Write the tile into `rows`, the interleaved RGB pixel rows of an image `width`
-    /// pixels wide from row `rect.y0` on.
-    pub fn scatter(&self, rows: &mut [f32], width: u32, rect: Rect) {
-        for j in rect.y0..rect.y1 {
-            let row = ((j - rect.y0) * width) as usize;
-            let l0 = ((j - rect.y0) * TILE) as usize;
-            for (n, i) in (rect.x0..rect.x1).enumerate() {
-                for ch in 0..3 {
-                    rows[(row + i as usize) * 3 + ch] = self.0[ch][l0 + n];
-                }
-            }
-        }
-    }
-}
-
-/// `e^x` for `x` in `[-87, 0]` (larger arguments are clamped into it), within 2e-7
-/// relative: `x = n·ln 2 + r` with `|r| <= ln 2 / 2`, a degree-7 polynomial for `e^r`
-/// (Cephes' `expf` coefficients, S. L. Moshier), and `2^n` built in the exponent bits.
-/// Branch-free and without calls, so a loop over lanes vectorizes. With `F`, the
-/// products and sums are fused ([`mla`]).
-#[inline(always)]
-pub(super) fn exp<const F: bool>(x: f32) -> f32 {
-    const LOG2E: f32 = std::f32::consts::LOG2_E;
-    const LN2_HI: f32 = 0.693_359_4;
-    const LN2_LO: f32 = -2.121_944_4e-4;
-    // 1.5·2^23: adding it rounds to an integer and leaves that integer in the low
-    // mantissa bits.
-    const ROUND: f32 = 12_582_912.0;
-    let x = x.clamp(-87.0, 0.0);
-    let k = mla::<F>(x, LOG2E, ROUND);
-    let n = k - ROUND;
-    let r = mla::<F>(-n, LN2_LO, mla::<F>(-n, LN2_HI, x));
-    let p = 1.987_569_1e-4;
-    let p = mla::<F>(p, r, 1.398_199_9e-3);
-    let p = mla::<F>(p, r, 8.333_452e-3);
-    let p = mla::<F>(p, r, 4.166_579_6e-2);
-    let p = mla::<F>(p, r, 1.666_666_5e-1);
-    let p = mla::<F>(p, r, 5e-1);
-    let er = mla::<F>(p * r, r, r) + 1.0;
-    let shift = (k.to_bits() as i32).wrapping_sub(ROUND.to_bits() as i32);
-    let scale = f32::from_bits(((shift + 127) as u32) << 23);
-    er * scale
-}
-
-/// `a·b + c`: with `F` in one rounding (a fused multiply-add, for builds where the CPU
-/// has one), else in two. Every product-and-sum of the loops goes through here, so the
-/// build without `F` does the operations of the plain expressions, in the same order.
-#[inline(always)]
-fn mla<const F: bool>(a: f32, b: f32, c: f32) -> f32 {
-    if F {
-        a.mul_add(b, c)
-    } else {
-        a * b + c
-    }
-}
-
-/// One Gaussian over the part of a tile it touches.
-struct Footprint<'g> {
-    g: &'g Projected,
-    cut: f32,
-    /// Tile-local columns `lx0..lx1` and pixel rows `ys` of its box in the tile.
-    lx0: usize,
-    lx1: usize,
-    ys: std::ops::Range<u32>,
-    /// Pixel column of the tile's first column.
-    x0: u32,
-}
-
-impl Footprint<'_> {
-    /// `None` where the box misses the tile, or where the ellipse in which `power`
-    /// reaches the cut-off misses the tile's part of the box: the box is square to the
-    /// axes, and a rotated, elongated Gaussian leaves whole tiles of it untouched.
-    fn of<'g>(g: &'g Projected, rect: Rect) -> Option<Footprint<'g>> {
-        let (xs, ys) = g.bbox.clip(rect)?;
-        let cut = g.cutoff();
-        // Offsets from the centre of the first and last pixel centres.
-        let dxs = [
-            xs.start as f32 + 0.5 - g.mean[0],
-            (xs.end - 1) as f32 + 0.5 - g.mean[0],
-        ];
-        let dys = [
-            ys.start as f32 + 0.5 - g.mean[1],
-            (ys.end - 1) as f32 + 0.5 - g.mean[1],
-        ];
-        // `-2·power`'s least value over those pixels, as a continuous rectangle (1e-3
-        // looser than the cut-off against rounding).
-        if q_min(g.conic, dxs, dys) > -2.0 * cut + 1e-3 {
-            return None;
-        }
-        Some(Footprint {
-            g,
-            cut,
-            lx0: (xs.start - rect.x0) as usize,
-            lx1: (xs.end - rect.x0) as usize,
-            ys,
-            x0: rect.x0,
-        })
-    }
-
-    /// The chunks of a tile row that the box meets, each with the mask of its columns
-    /// inside the box. (Narrowing them row by row to where the ellipse reaches the
-    /// cut-off was tried: a square root and two divisions per row cost more than the
-    /// lanes they saved.)
-    #[inline(always)]
-    fn chunks(&self) -> impl Iterator<Item = (usize, [bool; LANES])> + '_ {
-        (self.lx0 / LANES..=(self.lx1 - 1) / LANES).map(|c| {
-            let mut inside = [false; LANES];
-            for (l, m) in inside.iter_mut().enumerate() {
-                let col = c * LANES + l;
-                *m = (col >= self.lx0) & (col < self.lx1);
-            }
-            (c, inside)
-        })
-    }
-
-    /// `(alpha, dx)` on chunk `c` of the row at `dy` from the centre: `alpha` 0 where
-    /// the Gaussian does not touch.
-    #[inline(always)]
-    fn alphas<const F: bool>(&self, (c, inside): (usize, [bool; LANES]), dy: f32) -> (V, V) {
-        let g = self.g;
-        let [ca, cb, cc] = g.conic;
-        let cdy = cc * dy * dy;
-        let x0 = (self.x0 as usize + c * LANES) as f32 + 0.5;
-        let mut alpha = [0f32; LANES];
-        let mut dxs = [0f32; LANES];
-        for l in 0..LANES {
-            let dx = (x0 + l as f32) - g.mean[0];
-            // -0.5·(A dx² + C dy²) − B dx dy
-            let power = mla::<F>(-0.5, mla::<F>(ca * dx, dx, cdy), -(cb * dx * dy));
-            let a = g.opacity * exp::<F>(power);
-            // `&`, not `&&`: every lane evaluates every test, without branches.
-            let keep = inside[l] & (power >= self.cut) & (power <= 0.0) & (a >= ALPHA_MIN);
-            alpha[l] = if keep { a } else { 0.0 };
-            dxs[l] = dx;
-        }
-        (alpha, dxs)
-    }
-
-    /// The offsets from the centre of the columns of chunk `c`, as [`Footprint::alphas`]
-    /// computes them.
-    #[inline(always)]
-    fn dxs(&self, c: usize) -> V {
-        let x0 = (self.x0 as usize + c * LANES) as f32 + 0.5;
-        std::array::from_fn(|l| (x0 + l as f32) - self.g.mean[0])
-    }
-}
 
 /// Most Gaussians in a tile list whose alphas a fused step keeps ([`forward_tile`]'s
 /// `kept`): each keeps at most a tile's worth (1 KiB), so a thread holds at most 16 MiB;
 /// a longer list (Gaussians far larger than tiles) is evaluated again instead.
 pub(super) const KEPT_LIST_MAX: usize = 16 * 1024;
-
-/// The least value of `Q = A dx² + 2B dx dy + C dy²` (`-2·power`, a positive definite
-/// form) over the rectangle `dx ∈ [dxs[0], dxs[1]]`, `dy ∈ [dys[0], dys[1]]`: 0 when it
-/// holds the centre, else on an edge, where `Q` is a parabola minimized in closed form.
-fn q_min([a, b, c]: [f32; 3], dxs: [f32; 2], dys: [f32; 2]) -> f32 {
-    let holds = |r: [f32; 2]| r[0] <= 0.0 && 0.0 <= r[1];
-    if holds(dxs) && holds(dys) {
-        return 0.0;
-    }
-    let q = |x: f32, y: f32| a * x * x + 2.0 * b * x * y + c * y * y;
-    let mut least = f32::INFINITY;
-    for x in dxs {
-        let y = (-b * x / c).clamp(dys[0], dys[1]);
-        least = least.min(q(x, y));
-    }
-    for y in dys {
-        let x = (-b * y / a).clamp(dxs[0], dxs[1]);
-        least = least.min(q(x, y));
-    }
-    least
-}
 
 /// Σ of the lanes, in lane order.
 #[inline(always)]
@@ -255,17 +42,17 @@ fn forward_generic<const KEEP: bool, const F: bool>(
 ) {
     for &k in list {
         let g = &proj[k as usize];
-        let Some(f) = Footprint::of(g, rect) else {
+        let Some(f) = Footprint::of(g, g.cutoff(), rect) else {
             continue;
         };
         for chunk in f.chunks() {
             for j in f.ys.clone() {
                 let dy = (j as f32 + 0.5) - g.mean[1];
-                let (alpha, _) = f.alphas::<F>(chunk, dy);
+                let (alpha, _) = f.alphas::<F, false>(chunk, dy);
                 if KEEP {
                     kept.extend_from_slice(&alpha);
                 }
-                let at = (j - rect.y0) as usize * TILE_W + chunk.0 * LANES;
+                let at = (j - rect.y0) as usize * TILE_W + chunk * LANES;
                 for (ch, plane) in acc.0.iter_mut().enumerate() {
                     let px = &mut plane[at..at + LANES];
                     for l in 0..LANES {
@@ -294,7 +81,7 @@ fn backward_generic<const ALL: bool, const KEPT: bool, const F: bool>(
     let mut kept = kept.chunks_exact(LANES);
     for (slot, &k) in out.iter_mut().zip(list) {
         let g = &proj[k as usize];
-        let Some(f) = Footprint::of(g, rect) else {
+        let Some(f) = Footprint::of(g, g.cutoff(), rect) else {
             continue;
         };
         let [ca, cb, cc] = g.conic;
@@ -303,7 +90,7 @@ fn backward_generic<const ALL: bool, const KEPT: bool, const F: bool>(
         let (mut c0, mut c1, mut c2) = (z, z, z);
         let (mut gx, mut gy, mut ga, mut gb, mut gc, mut go) = (z, z, z, z, z, z);
         for chunk in f.chunks() {
-            let dx_kept = f.dxs(chunk.0);
+            let dx_kept = f.dxs(chunk);
             for j in f.ys.clone() {
                 let dy = (j as f32 + 0.5) - g.mean[1];
                 let (alpha, dx) = if KEPT {
@@ -311,9 +98,9 @@ fn backward_generic<const ALL: bool, const KEPT: bool, const F: bool>(
                     let a = kept.next().unwrap_or(&[0.0; LANES][..]);
                     (std::array::from_fn(|l| a[l]), dx_kept)
                 } else {
-                    f.alphas::<F>(chunk, dy)
+                    f.alphas::<F, false>(chunk, dy)
                 };
-                let at = (j - rect.y0) as usize * TILE_W + chunk.0 * LANES;
+                let at = (j - rect.y0) as usize * TILE_W + chunk * LANES;
                 let (r, gg, b) = (
                     &dr[at..at + LANES],
                     &dg[at..at + LANES],
@@ -459,33 +246,6 @@ mod simd {
 mod tests {
     use super::*;
     use crate::fit::raster::ProjGrad;
-
-    fn exp_worst<const F: bool>() -> f64 {
-        let mut worst = 0f64;
-        let mut x = -87.0f32;
-        while x <= 0.0 {
-            let want = f64::from(x).exp();
-            let got = f64::from(exp::<F>(x));
-            worst = worst.max(((got - want) / want).abs());
-            x += 1e-3;
-        }
-        worst
-    }
-
-    #[test]
-    fn exp_is_within_2e7_relative_over_its_range() {
-        for (worst, fused) in [(exp_worst::<false>(), false), (exp_worst::<true>(), true)] {
-            assert!(
-                worst < 2e-7,
-                "fused {fused}: worst relative error {worst:e}"
-            );
-        }
-        assert_eq!(exp::<false>(0.0), 1.0);
-        assert_eq!(exp::<true>(0.0), 1.0);
-        // Out of range: clamped, never NaN, Inf or negative.
-        assert!(exp::<false>(1.0) == 1.0 && exp::<false>(-1e9) > 0.0);
-        assert!(exp::<true>(-1e9) < 1e-37 && exp::<true>(-1e9) > 0.0);
-    }
 
     /// A tile's forward pass (image and kept alphas) and its backward passes (all
     /// gradients and colours only) for `d`, in the build `F`; `keep` decides whether the

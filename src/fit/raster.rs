@@ -3,9 +3,9 @@
 //! Both passes apply the per-pixel rule of [`Projected::alpha_at`] over the same
 //! projection ([`crate::render::project`]) and tile lists as the decoder. In `alpha`
 //! blending the forward pass gives the decoder's pixels bit for bit; `sum` blending, the
-//! default, goes through [`super::lanes`], eight pixels at a time with a polynomial
-//! `exp`, within 1e-5 (relative to 1 + the value) of the decoder's pixels (test
-//! `forward_matches_the_decoder`).
+//! default, goes through [`super::lanes`], eight pixels at a time, within 1e-5 (relative
+//! to 1 + the value) of the decoder's pixels where it fuses multiply-adds, bit for bit
+//! where it does not (test `forward_matches_the_decoder`).
 //! The file an encode writes is measured with the decoder itself.
 //!
 //! The backward pass returns, for each projected Gaussian, the gradient with respect to
@@ -14,9 +14,10 @@
 //! own gradient slots and they are summed in a fixed order afterwards, so results do not
 //! depend on the number of threads.
 
-use super::lanes::{self, Planes};
+use super::lanes;
 use crate::contract::{ALPHA_MAX, ALPHA_MIN, TRANSMITTANCE_MIN};
 use crate::model::Blend;
+use crate::render::lanes::Planes;
 use crate::render::{Projected, Rect, TileLists, TILE};
 use std::ops::Range;
 
@@ -106,7 +107,7 @@ fn touch(g: &Projected, cut: f32, dx: f32, dy: f32, cdy: f32, blend: Blend) -> O
     if !(cut..=0.0).contains(&power) {
         return None;
     }
-    let raw = g.opacity * power.exp();
+    let raw = g.opacity * crate::contract::exp(power);
     let (alpha, capped) = if blend == Blend::Alpha && raw > ALPHA_MAX {
         (ALPHA_MAX, true)
     } else {

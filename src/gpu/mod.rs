@@ -88,7 +88,35 @@ fn contract() -> String {
         // `{:?}` prints the shortest decimal that reads back as the same f32.
         out += &format!("const {name}: f32 = {value:?};\n");
     }
-    out
+    out + &spec_exp()
+}
+
+/// The `exp` of spec §6.3 in WGSL, `spec_exp`, with the constants of
+/// [`crate::contract::exp`] as their exact bits. WGSL's `round` is ties-to-even, as the
+/// CPU's rounding by `1.5·2^23` is. A GPU compiler may still fuse a product and a sum,
+/// which is why the GPU's pixels are held to a bound rather than to the CPU's bits.
+fn spec_exp() -> String {
+    use crate::contract::{EXP_LN2_HI, EXP_LN2_LO, EXP_LOG2E, EXP_MAX, EXP_MIN, EXP_POLY};
+    let bits = |v: f32| format!("bitcast<f32>({:#010x}u)", v.to_bits());
+    let mut horner = format!("    var p = {};\n", bits(EXP_POLY[0]));
+    for c in &EXP_POLY[1..] {
+        horner += &format!("    p = p * r + {};\n", bits(*c));
+    }
+    format!(
+        "fn spec_exp(x_in: f32) -> f32 {{\n\
+         \x20   let x = clamp(x_in, {min:?}, {max:?});\n\
+         \x20   let n = round(x * {log2e});\n\
+         \x20   let r = (x - n * {hi}) - n * {lo};\n\
+         {horner}\
+         \x20   let er = ((p * r) * r + r) + 1.0;\n\
+         \x20   return er * bitcast<f32>(u32(i32(n) + 127) << 23u);\n\
+         }}\n",
+        min = EXP_MIN,
+        max = EXP_MAX,
+        log2e = bits(EXP_LOG2E),
+        hi = bits(EXP_LN2_HI),
+        lo = bits(EXP_LN2_LO),
+    )
 }
 
 /// [`contract`], the indexing helpers of `shaders/grid.wgsl`, then `parts`.

@@ -7,20 +7,16 @@
 //! Gaussian's box. Which thread renders a band never changes the arithmetic, so the
 //! parallel and sequential builds give identical bits.
 
+use super::lanes::{Kernel, Planes};
 use super::project::{Projected, Rect};
 use super::tiles::{runs, Bins, Span};
 use super::TILE;
-use crate::contract::{ALPHA_MAX, ALPHA_MIN, TRANSMITTANCE_MIN};
 use crate::model::{Blend, ToneCurve};
-use std::ops::Range;
 
 /// Most entries of the per-band lists binned at once (64 MiB of indices).
 const BAND_BUDGET: u64 = 1 << 24;
 /// Most entries of one band's per-tile lists binned at once, per thread (4 MiB).
 const TILE_BUDGET: u64 = 1 << 20;
-/// Tile area in pixels.
-const TILE_PIXELS: usize = (TILE * TILE) as usize;
-
 /// What the renderer writes a band of pixels into. Blending happens in `f32` RGB; an
 /// output of another layout gets each band converted from a per-thread scratch band, so
 /// that a whole-image `f32` copy is never made.
@@ -102,19 +98,19 @@ pub(crate) fn render_projected<O: Output>(
     parallel: bool,
 ) {
     let budgets = (BAND_BUDGET, TILE_BUDGET);
-    render_budgeted::<O>(proj, blend, tone, (width, height), out, parallel, budgets);
+    let how = (parallel, Kernel::detect(), budgets);
+    render_with::<O>(proj, blend, tone, (width, height), out, how);
 }
 
-/// [`render_projected`] with explicit binning budgets `(bands, tiles)`, so that tests can
-/// force many small runs.
-fn render_budgeted<O: Output>(
+/// [`render_projected`] with the build of the inner loops and the binning budgets
+/// `(bands, tiles)` given, so that tests can force each build and many small runs.
+fn render_with<O: Output>(
     proj: &[Projected],
     blend: Blend,
     tone: Option<&ToneCurve>,
     (width, height): (u32, u32),
     out: &mut [O::Elem],
-    parallel: bool,
-    (band_budget, tile_budget): (u64, u64),
+    (parallel, kernel, (band_budget, tile_budget)): (bool, Kernel, (u64, u64)),
 ) {
     debug_assert_eq!(out.len(), width as usize * height as usize * O::PER_PIXEL);
     let row_len = width as usize * O::PER_PIXEL;
@@ -138,6 +134,7 @@ fn render_budgeted<O: Output>(
                 proj,
                 cuts: &cuts,
                 blend,
+                kernel,
                 width,
                 y0: band * TILE,
                 tile_budget,
@@ -177,9 +174,10 @@ struct Scratch {
 /// What every tile of one band needs to know.
 struct Band<'a> {
     proj: &'a [Projected],
-    /// [`cutoff`] of each Gaussian's opacity.
+    /// [`Projected::cutoff`] of each Gaussian.
     cuts: &'a [f32],
     blend: Blend,
+    kernel: Kernel,
     width: u32,
     /// First pixel row of the band.
     y0: u32,
@@ -201,6 +199,7 @@ impl Band<'_> {
             let b = &self.proj[k as usize].bbox;
             (k, b.x0 / TILE, b.x1 / TILE)
         });
+        let mut acc = Planes::zero();
         for run in runs(spans.clone(), tiles_x, self.tile_budget) {
             tiles.fill(spans.clone(), run.clone());
             for tx in run {
@@ -215,126 +214,12 @@ impl Band<'_> {
                     y0: self.y0,
                     y1,
                 };
-                match self.blend {
-                    Blend::Sum => self.tile_sum(tile, rect, rows),
-                    Blend::Alpha => self.tile_alpha(tile, rect, rows),
-                }
+                acc.0.iter_mut().for_each(|p| p.fill(0.0));
+                self.kernel
+                    .tile(self.blend, tile, self.proj, self.cuts, rect, &mut acc);
+                acc.scatter(rows, self.width, rect);
             }
         }
-    }
-
-    /// `sum` blending: `acc += c · alpha` for every Gaussian of the tile, in list order.
-    fn tile_sum(&self, list: &[u32], rect: Rect, rows: &mut [f32]) {
-        let row_len = self.width as usize * 3;
-        let centres = Centres::new(rect);
-        let mut power = [0.0f32; TILE as usize];
-        for &k in list {
-            let g = &self.proj[k as usize];
-            let Some((xs, ys)) = g.bbox.clip(rect) else {
-                continue;
-            };
-            let (o, col) = (g.opacity, g.color);
-            let cut = self.cuts[k as usize];
-            for j in ys {
-                let dy = (j as f32 + 0.5) - g.mean[1];
-                let power = &mut power[..xs.len()];
-                powers(g, centres.of(&xs, rect), dy, power);
-                let base = (j - self.y0) as usize * row_len;
-                let row = &mut rows[base + xs.start as usize * 3..base + xs.end as usize * 3];
-                for (px, &power) in row.chunks_exact_mut(3).zip(power.iter()) {
-                    // `power > 0` is skipped by the contract; below `cut`, alpha is
-                    // certainly under ALPHA_MIN, so the exponential can be spared.
-                    if !(cut..=0.0).contains(&power) {
-                        continue;
-                    }
-                    let alpha = o * power.exp();
-                    if alpha < ALPHA_MIN {
-                        continue;
-                    }
-                    px[0] += col[0] * alpha;
-                    px[1] += col[1] * alpha;
-                    px[2] += col[2] * alpha;
-                }
-            }
-        }
-    }
-
-    /// `alpha` blending: front to back in list order, with per-pixel transmittance.
-    fn tile_alpha(&self, list: &[u32], rect: Rect, rows: &mut [f32]) {
-        let row_len = self.width as usize * 3;
-        let centres = Centres::new(rect);
-        let mut power = [0.0f32; TILE as usize];
-        let mut trans = [1.0f32; TILE_PIXELS];
-        // Pixels of the tile still taking light; the tile is done when none is.
-        let mut live = ((rect.x1 - rect.x0) * (rect.y1 - rect.y0)) as usize;
-        for &k in list {
-            let g = &self.proj[k as usize];
-            let Some((xs, ys)) = g.bbox.clip(rect) else {
-                continue;
-            };
-            let (o, col) = (g.opacity, g.color);
-            let cut = self.cuts[k as usize];
-            for j in ys {
-                let dy = (j as f32 + 0.5) - g.mean[1];
-                let power = &mut power[..xs.len()];
-                powers(g, centres.of(&xs, rect), dy, power);
-                let base = (j - self.y0) as usize * row_len;
-                let row = &mut rows[base + xs.start as usize * 3..base + xs.end as usize * 3];
-                let t0 = (j - rect.y0) as usize * TILE as usize + (xs.start - rect.x0) as usize;
-                let trow = &mut trans[t0..t0 + xs.len()];
-                for ((px, t), &power) in row.chunks_exact_mut(3).zip(trow).zip(power.iter()) {
-                    if *t < TRANSMITTANCE_MIN || !(cut..=0.0).contains(&power) {
-                        continue;
-                    }
-                    let alpha = (o * power.exp()).min(ALPHA_MAX);
-                    if alpha < ALPHA_MIN {
-                        continue;
-                    }
-                    px[0] += col[0] * alpha * *t;
-                    px[1] += col[1] * alpha * *t;
-                    px[2] += col[2] * alpha * *t;
-                    *t *= 1.0 - alpha;
-                    if *t < TRANSMITTANCE_MIN {
-                        live -= 1;
-                    }
-                }
-            }
-            if live == 0 {
-                break;
-            }
-        }
-    }
-}
-
-/// `i as f32 + 0.5` for the columns `i` of a tile, computed once per tile.
-struct Centres([f32; TILE as usize]);
-
-impl Centres {
-    fn new(rect: Rect) -> Self {
-        // Past the image's last column the values are never read.
-        Centres(std::array::from_fn(|k| {
-            rect.x0.saturating_add(k as u32) as f32 + 0.5
-        }))
-    }
-
-    /// The centres of columns `xs`, which lie in `rect`.
-    #[inline]
-    fn of(&self, xs: &Range<u32>, rect: Rect) -> &[f32] {
-        &self.0[(xs.start - rect.x0) as usize..(xs.end - rect.x0) as usize]
-    }
-}
-
-/// The contract's `power = -0.5·(A dx² + C dy²) - B dx dy` of `g` for the pixel centres
-/// `cx` of a row at vertical offset `dy`, with `dx = cx - mx`, in exactly this `f32`
-/// order. A separate pass without branches or calls, so that it can vectorize.
-#[inline]
-fn powers(g: &Projected, cx: &[f32], dy: f32, out: &mut [f32]) {
-    let [ca, cb, cc] = g.conic;
-    let mx = g.mean[0];
-    let cdy = cc * dy * dy;
-    for (p, &x) in out.iter_mut().zip(cx) {
-        let dx = x - mx;
-        *p = -0.5 * (ca * dx * dx + cdy) - cb * dx * dy;
     }
 }
 
@@ -373,6 +258,66 @@ mod tests {
         }
     }
 
+    /// The per-pixel rule of spec §6.3–6.4 over every Gaussian, one pixel at a time.
+    fn by_the_rule(proj: &[Projected], blend: Blend, w: u32, h: u32) -> Vec<f32> {
+        let mut out = vec![0.0; (w * h * 3) as usize];
+        for j in 0..h {
+            for i in 0..w {
+                let px = &mut out[((j * w + i) * 3) as usize..][..3];
+                let mut t = 1.0f32;
+                for g in proj {
+                    let Some(alpha) = g.alpha_at(i, j, blend) else {
+                        continue;
+                    };
+                    match blend {
+                        Blend::Sum => (0..3).for_each(|c| px[c] += g.color[c] * alpha),
+                        Blend::Alpha => {
+                            (0..3).for_each(|c| px[c] += g.color[c] * alpha * t);
+                            t *= 1.0 - alpha;
+                            if t < crate::contract::TRANSMITTANCE_MIN {
+                                break;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    /// Each build of the inner loops (the portable one, and AVX2 where the CPU has it)
+    /// gives the bits of the rule: elongated, rotated Gaussians (whose boxes hold tiles
+    /// the ellipse misses), partial tiles and chunks, opaque stacks that stop early.
+    #[test]
+    fn every_build_gives_the_bits_of_the_rule() {
+        for blend in [Blend::Sum, Blend::Alpha] {
+            for (seed, cov_param) in [(3, CovParam::LogScaleRotation), (4, CovParam::Cholesky)] {
+                let mut spec = SceneSpec::new(50, 40, 500, blend);
+                spec.sigma_px = (0.2, 25.0);
+                spec.cov_param = cov_param;
+                let scene = random_scene(seed, spec);
+                for (w, h) in [(50, 40), (37, 23), (3, 70)] {
+                    let proj = project_scene(&scene, w, h);
+                    let want = by_the_rule(&proj, blend, w, h);
+                    assert!(want.iter().any(|&x| x != 0.0));
+                    for kernel in Kernel::all() {
+                        let mut got = vec![f32::NAN; want.len()];
+                        let how = (false, kernel, (BAND_BUDGET, TILE_BUDGET));
+                        render_with::<RgbF32>(&proj, blend, None, (w, h), &mut got, how);
+                        let diff = want
+                            .iter()
+                            .zip(&got)
+                            .position(|(a, b)| a.to_bits() != b.to_bits());
+                        assert!(
+                            diff.is_none(),
+                            "{blend:?} {cov_param:?} {w}x{h} {kernel:?} at {diff:?}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+
     #[test]
     fn tiny_budgets_give_the_same_image() {
         // Binning in runs of one band and one tile must not change what a pixel visits.
@@ -384,16 +329,10 @@ mod tests {
             let proj = project_scene(&scene, w, h);
             let mut a = vec![0.0; (w * h * 3) as usize];
             let mut b = a.clone();
-            render_budgeted::<RgbF32>(
-                &proj,
-                blend,
-                None,
-                (w, h),
-                &mut a,
-                false,
-                (BAND_BUDGET, TILE_BUDGET),
-            );
-            render_budgeted::<RgbF32>(&proj, blend, None, (w, h), &mut b, false, (0, 0));
+            let kernel = Kernel::detect();
+            let how = (false, kernel, (BAND_BUDGET, TILE_BUDGET));
+            render_with::<RgbF32>(&proj, blend, None, (w, h), &mut a, how);
+            render_with::<RgbF32>(&proj, blend, None, (w, h), &mut b, (false, kernel, (0, 0)));
             assert!(a.iter().any(|&x| x != 0.0));
             assert!(
                 a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits()),

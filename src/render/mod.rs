@@ -8,8 +8,9 @@
 //!   only place where a covariance becomes a conic and a pixel box, so other renderers
 //!   reuse it rather than re-deriving the clamps.
 //! * [`Projected::alpha_at`]: the per-pixel rule, written once, readably.
-//! * `tiles` and `cpu`: the CPU renderer. Tiles only decide *which* Gaussians a pixel
-//!   visits (those whose pixel box holds it), never in what order, so the tiled result
+//! * `tiles`, `cpu` and `lanes`: the CPU renderer. Tiles only decide *which* Gaussians a
+//!   pixel visits (those whose pixel box holds it), never in what order, and `lanes`
+//!   evaluates eight pixels at once with the same binary32 operations, so the tiled result
 //!   is bit-identical to a naive loop over all Gaussians for every pixel.
 //!
 //! Without a tone curve the output is linear in the stored (sRGB-encoded) colour values
@@ -19,6 +20,7 @@
 //! shows every blended value through it, in `[0, 1]`.
 
 mod cpu;
+pub(crate) mod lanes;
 mod project;
 mod tiles;
 
@@ -68,10 +70,11 @@ impl RgbImage {
     }
 }
 
-/// `floor(clamp(c, 0, 1) · 255 + 0.5)`; the float-to-int cast maps NaN to 0.
+/// `floor(clamp(c, 0, 1) · 255 + 0.5)`. The value before the cast lies in `[0.5, 255.5]`,
+/// where truncation is `floor` (without a call to `floorf`); the cast maps NaN to 0.
 #[inline]
 pub(crate) fn to_u8(c: f32) -> u8 {
-    (c.clamp(0.0, 1.0) * 255.0 + 0.5).floor() as u8
+    (c.clamp(0.0, 1.0) * 255.0 + 0.5) as u8
 }
 
 /// Render `scene` at `width × height` on the CPU.

@@ -80,7 +80,7 @@ impl Projected {
         if power > 0.0 {
             return None;
         }
-        let mut alpha = self.opacity * power.exp();
+        let mut alpha = self.opacity * crate::contract::exp(power);
         if blend == Blend::Alpha {
             alpha = alpha.min(ALPHA_MAX);
         }
@@ -262,7 +262,10 @@ mod tests {
         assert_eq!(p.opacity, 1.0);
         assert_eq!(p.alpha_at(4, 4, Blend::Sum), Some(1.0));
         assert_eq!(p.alpha_at(4, 4, Blend::Alpha), Some(ALPHA_MAX));
-        assert_eq!(p.alpha_at(5, 4, Blend::Sum), Some((-0.5f32).exp()));
+        assert_eq!(
+            p.alpha_at(5, 4, Blend::Sum),
+            Some(crate::contract::exp(-0.5))
+        );
         assert_eq!(p.alpha_at(4, 5, Blend::Sum), None);
         assert_eq!(p.alpha_at(0, 4, Blend::Sum), None);
     }
