@@ -15,10 +15,56 @@
 //! loops, which define the pixels, stay unfused (spec §6), and the unfused build here
 //! gives the decoder's bits.
 
-use crate::render::lanes::{mla, Footprint, Planes, LANES, V};
+use crate::render::lanes::{mla, Footprint, LANES, V};
 use crate::render::{Projected, Rect, TILE};
 
 const TILE_W: usize = TILE as usize;
+/// Pixels of a tile.
+const TILE_PIXELS: usize = TILE_W * TILE_W;
+
+/// One tile in three planes (R, G, B), row-major, [`TILE`] pixels a row whatever the
+/// tile's real width.
+#[derive(Clone)]
+pub(super) struct Planes(pub [[f32; TILE_PIXELS]; 3]);
+
+impl Planes {
+    pub fn zero() -> Planes {
+        Planes([[0.0; TILE_PIXELS]; 3])
+    }
+
+    pub fn ones() -> Planes {
+        Planes([[1.0; TILE_PIXELS]; 3])
+    }
+
+    /// The tile `rect` of an interleaved RGB image `width` pixels wide.
+    pub fn gather(image: &[f32], width: u32, rect: Rect) -> Planes {
+        let mut p = Planes::zero();
+        for j in rect.y0..rect.y1 {
+            let row = (j * width) as usize;
+            let l0 = ((j - rect.y0) * TILE) as usize;
+            for (n, i) in (rect.x0..rect.x1).enumerate() {
+                for ch in 0..3 {
+                    p.0[ch][l0 + n] = image[(row + i as usize) * 3 + ch];
+                }
+            }
+        }
+        p
+    }
+
+    /// Write the tile into `rows`, the interleaved RGB pixel rows of an image `width`
+    /// pixels wide from row `rect.y0` on.
+    pub fn scatter(&self, rows: &mut [f32], width: u32, rect: Rect) {
+        let n = (rect.x1 - rect.x0) as usize;
+        for j in rect.y0..rect.y1 {
+            let at = ((j - rect.y0) as usize * width as usize + rect.x0 as usize) * 3;
+            let l0 = (j - rect.y0) as usize * TILE_W;
+            let [r, g, b] = [&self.0[0], &self.0[1], &self.0[2]].map(|p| &p[l0..l0 + n]);
+            for (k, px) in rows[at..at + n * 3].chunks_exact_mut(3).enumerate() {
+                px.copy_from_slice(&[r[k], g[k], b[k]]);
+            }
+        }
+    }
+}
 
 /// Most Gaussians in a tile list whose alphas a fused step keeps ([`forward_tile`]'s
 /// `kept`): each keeps at most a tile's worth (1 KiB), so a thread holds at most 16 MiB;
@@ -48,7 +94,7 @@ fn forward_generic<const KEEP: bool, const F: bool>(
         for chunk in f.chunks() {
             for j in f.ys.clone() {
                 let dy = (j as f32 + 0.5) - g.mean[1];
-                let (alpha, _) = f.alphas::<F, false>(chunk, dy);
+                let (alpha, _) = f.alphas::<F, false>(chunk * LANES, dy);
                 if KEEP {
                     kept.extend_from_slice(&alpha);
                 }
@@ -98,7 +144,7 @@ fn backward_generic<const ALL: bool, const KEPT: bool, const F: bool>(
                     let a = kept.next().unwrap_or(&[0.0; LANES][..]);
                     (std::array::from_fn(|l| a[l]), dx_kept)
                 } else {
-                    f.alphas::<F, false>(chunk, dy)
+                    f.alphas::<F, false>(chunk * LANES, dy)
                 };
                 let at = (j - rect.y0) as usize * TILE_W + chunk * LANES;
                 let (r, gg, b) = (

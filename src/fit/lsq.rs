@@ -7,9 +7,9 @@
 //! colour part of the backward pass applies `Aᵀ`, so conjugate gradients (on the normal
 //! equations) needs only renders.
 
+use super::lanes::Planes;
 use super::raster::{self, Need};
 use crate::model::Blend;
-use crate::render::lanes::Planes;
 use crate::render::{Projected, TileLists};
 
 /// Ridge term: keeps Gaussians that touch almost nothing from taking huge colours.

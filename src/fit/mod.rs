@@ -659,7 +659,7 @@ impl<'a> Fitter<'a> {
         let (weights, image) = if self.blend == Blend::Sum {
             let tiles = crate::render::TileLists::bin(&projected, w, h);
             let mut image = vec![0f32; (w * h * 3) as usize];
-            let ones = |_: &crate::render::lanes::Planes, _| crate::render::lanes::Planes::ones();
+            let ones = |_: &lanes::Planes, _| lanes::Planes::ones();
             let c = raster::sum_adjoint(&projected, &tiles, w, h, Some(&mut image), ones);
             (c, image)
         } else {

@@ -14,10 +14,9 @@
 //! own gradient slots and they are summed in a fixed order afterwards, so results do not
 //! depend on the number of threads.
 
-use super::lanes;
+use super::lanes::{self, Planes};
 use crate::contract::{ALPHA_MAX, ALPHA_MIN, TRANSMITTANCE_MIN};
 use crate::model::Blend;
-use crate::render::lanes::Planes;
 use crate::render::{Projected, Rect, TileLists, TILE};
 use std::ops::Range;
 

@@ -128,7 +128,7 @@ fn fused_step_gives_the_gradients_of_the_passes() {
                 .collect();
             let tiles = crate::render::TileLists::bin(&proj, w, h);
             let got = sum_adjoint(&proj, &tiles, w, h, None, |acc, rect| {
-                let mut d = crate::render::lanes::Planes::gather(&target, w, rect);
+                let mut d = super::lanes::Planes::gather(&target, w, rect);
                 for (dc, ac) in d.0.iter_mut().zip(&acc.0) {
                     dc.iter_mut().zip(ac).for_each(|(y, a)| *y -= a);
                 }

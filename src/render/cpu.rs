@@ -7,7 +7,7 @@
 //! Gaussian's box. Which thread renders a band never changes the arithmetic, so the
 //! parallel and sequential builds give identical bits.
 
-use super::lanes::{Kernel, Planes};
+use super::lanes::{Acc, Kernel};
 use super::project::{Projected, Rect};
 use super::tiles::{runs, Bins, Span};
 use super::TILE;
@@ -199,7 +199,7 @@ impl Band<'_> {
             let b = &self.proj[k as usize].bbox;
             (k, b.x0 / TILE, b.x1 / TILE)
         });
-        let mut acc = Planes::zero();
+        let mut acc = Acc::zero();
         for run in runs(spans.clone(), tiles_x, self.tile_budget) {
             tiles.fill(spans.clone(), run.clone());
             for tx in run {

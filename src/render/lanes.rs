@@ -17,7 +17,7 @@
 //! dependency. AVX-512 is a build of its own because its 32 registers hold the
 //! polynomial's constants: 10.9 ms against 9.7 ms for kodim23 at 768×512 here.)
 //!
-//! The encoder's loops (`crate::fit`) share [`Footprint`], [`Planes`] and the polynomial; they
+//! The encoder's loops (`crate::fit`) share [`Footprint`] and the polynomial; they
 //! may fuse multiply-adds (`F`), since a fit needs the decoder's values, not its bits.
 
 use super::project::{Projected, Rect};
@@ -30,57 +30,9 @@ use crate::model::Blend;
 /// Pixels per chunk: one AVX register of `f32`, two SSE or NEON ones.
 pub(crate) const LANES: usize = 8;
 const TILE_W: usize = TILE as usize;
-/// Pixels of a tile.
-pub(crate) const TILE_PIXELS: usize = TILE_W * TILE_W;
 
 /// One value per lane.
 pub(crate) type V = [f32; LANES];
-
-/// One tile in three planes (R, G, B), row-major, [`TILE`] pixels a row whatever the
-/// tile's real width.
-#[derive(Clone)]
-pub(crate) struct Planes(pub [[f32; TILE_PIXELS]; 3]);
-
-impl Planes {
-    pub fn zero() -> Planes {
-        Planes([[0.0; TILE_PIXELS]; 3])
-    }
-
-    #[cfg(feature = "encode")]
-    pub fn ones() -> Planes {
-        Planes([[1.0; TILE_PIXELS]; 3])
-    }
-
-    /// The tile `rect` of an interleaved RGB image `width` pixels wide.
-    #[cfg(feature = "encode")]
-    pub fn gather(image: &[f32], width: u32, rect: Rect) -> Planes {
-        let mut p = Planes::zero();
-        for j in rect.y0..rect.y1 {
-            let row = (j * width) as usize;
-            let l0 = ((j - rect.y0) * TILE) as usize;
-            for (n, i) in (rect.x0..rect.x1).enumerate() {
-                for ch in 0..3 {
-                    p.0[ch][l0 + n] = image[(row + i as usize) * 3 + ch];
-                }
-            }
-        }
-        p
-    }
-
-    /// Write the tile into `rows`, the interleaved RGB pixel rows of an image `width`
-    /// pixels wide from row `rect.y0` on.
-    pub fn scatter(&self, rows: &mut [f32], width: u32, rect: Rect) {
-        let n = (rect.x1 - rect.x0) as usize;
-        for j in rect.y0..rect.y1 {
-            let at = ((j - rect.y0) as usize * width as usize + rect.x0 as usize) * 3;
-            let l0 = (j - rect.y0) as usize * TILE_W;
-            let [r, g, b] = [&self.0[0], &self.0[1], &self.0[2]].map(|p| &p[l0..l0 + n]);
-            for (k, px) in rows[at..at + n * 3].chunks_exact_mut(3).enumerate() {
-                px.copy_from_slice(&[r[k], g[k], b[k]]);
-            }
-        }
-    }
-}
 
 /// One Gaussian over the part of a tile it touches.
 pub(crate) struct Footprint<'g> {
@@ -124,26 +76,35 @@ impl Footprint<'_> {
         })
     }
 
-    /// The chunks of a tile row that the box meets. (Narrowing them row by row to where
-    /// the ellipse reaches the cut-off was tried for fitting: a square root and two
+    /// The chunks of a tile row that the box meets, aligned to multiples of [`LANES`]
+    /// (the fit's loops, whose planes are [`TILE`] wide). (Narrowing them row by row to
+    /// where the ellipse reaches the cut-off was tried for fitting: a square root and two
     /// divisions per row cost more than the lanes they saved.)
     #[inline(always)]
     pub fn chunks(&self) -> std::ops::RangeInclusive<usize> {
         self.lx0 / LANES..=(self.lx1 - 1) / LANES
     }
 
-    /// `(alpha, dx)` on chunk `c` of the row at `dy` from the centre: `alpha` 0 where
-    /// the Gaussian does not touch the pixel (outside the box's columns, `power` out of
-    /// `[cut, 0]`, `alpha < ALPHA_MIN`). With `CAP`, alpha is capped at `ALPHA_MAX` before
-    /// the threshold, as `alpha` blending does.
+    /// The first columns of the chunks that cover the box's columns from its first one
+    /// on: `ceil(width / LANES)` chunks, where aligned ones can take one more (a box of 3
+    /// columns from column 6 takes two). For accumulators [`LANES`] wider than a tile.
     #[inline(always)]
-    pub fn alphas<const F: bool, const CAP: bool>(&self, c: usize, dy: f32) -> (V, V) {
+    pub fn starts(&self) -> std::iter::StepBy<std::ops::Range<usize>> {
+        (self.lx0..self.lx1).step_by(LANES)
+    }
+
+    /// `(alpha, dx)` on the [`LANES`] columns from tile-local column `start` of the row
+    /// at `dy` from the centre: `alpha` 0 where the Gaussian does not touch the pixel
+    /// (outside the box's columns, `power` out of `[cut, 0]`, `alpha < ALPHA_MIN`). With
+    /// `CAP`, alpha is capped at `ALPHA_MAX` before the threshold, as `alpha` blending does.
+    #[inline(always)]
+    pub fn alphas<const F: bool, const CAP: bool>(&self, start: usize, dy: f32) -> (V, V) {
         let g = self.g;
         let [ca, cb, cc] = g.conic;
         let cdy = cc * dy * dy;
-        let first = self.x0 + (c * LANES) as u32;
+        let first = self.x0 + start as u32;
         // The box's columns relative to the chunk's first (negative where it starts before).
-        let at = (c * LANES) as i32;
+        let at = start as i32;
         let (lx0, lx1) = (self.lx0 as i32 - at, self.lx1 as i32 - at);
         let mut alpha = [0f32; LANES];
         let mut dxs = [0f32; LANES];
@@ -269,7 +230,7 @@ impl Kernel {
         proj: &[Projected],
         cuts: &[f32],
         rect: Rect,
-        acc: &mut Planes,
+        acc: &mut Acc,
     ) {
         match self {
             Kernel::Portable => match blend {
@@ -286,19 +247,47 @@ impl Kernel {
     }
 }
 
+/// Row stride of [`Acc`]: a chunk may start at any column of a tile row.
+const ACC_W: usize = TILE_W + LANES;
+
+/// A tile in three planes (R, G, B) whose rows are [`LANES`] wider than a tile, so that a
+/// chunk starting at the box's first column never reaches the next row; the padding is
+/// only ever given zeros.
+pub(crate) struct Acc(pub [[f32; ACC_W * TILE_W]; 3]);
+
+impl Acc {
+    pub fn zero() -> Acc {
+        Acc([[0.0; ACC_W * TILE_W]; 3])
+    }
+
+    /// Write the tile into `rows`, the interleaved RGB pixel rows of an image `width`
+    /// pixels wide from row `rect.y0` on.
+    pub fn scatter(&self, rows: &mut [f32], width: u32, rect: Rect) {
+        let n = (rect.x1 - rect.x0) as usize;
+        for j in rect.y0..rect.y1 {
+            let at = ((j - rect.y0) as usize * width as usize + rect.x0 as usize) * 3;
+            let l0 = (j - rect.y0) as usize * ACC_W;
+            let [r, g, b] = [&self.0[0], &self.0[1], &self.0[2]].map(|p| &p[l0..l0 + n]);
+            for (k, px) in rows[at..at + n * 3].chunks_exact_mut(3).enumerate() {
+                px.copy_from_slice(&[r[k], g[k], b[k]]);
+            }
+        }
+    }
+}
+
 /// `sum` blending: `acc += c·alpha` for every Gaussian of the tile, in list order.
 #[inline(always)]
-fn tile_sum(list: &[u32], proj: &[Projected], cuts: &[f32], rect: Rect, acc: &mut Planes) {
+fn tile_sum(list: &[u32], proj: &[Projected], cuts: &[f32], rect: Rect, acc: &mut Acc) {
     for &k in list {
         let g = &proj[k as usize];
         let Some(f) = Footprint::of(g, cuts[k as usize], rect) else {
             continue;
         };
-        for chunk in f.chunks() {
+        for start in f.starts() {
             for j in f.ys.clone() {
                 let dy = offset(j, g.mean[1]);
-                let (alpha, _) = f.alphas::<false, false>(chunk, dy);
-                let at = (j - rect.y0) as usize * TILE_W + chunk * LANES;
+                let (alpha, _) = f.alphas::<false, false>(start, dy);
+                let at = (j - rect.y0) as usize * ACC_W + start;
                 for (ch, plane) in acc.0.iter_mut().enumerate() {
                     let px = &mut plane[at..at + LANES];
                     // Where alpha is 0 this adds ±0, which leaves every sum as it is: a
@@ -315,19 +304,19 @@ fn tile_sum(list: &[u32], proj: &[Projected], cuts: &[f32], rect: Rect, acc: &mu
 /// `alpha` blending: front to back in list order, with per-pixel transmittance; the tile
 /// is done when no pixel of it takes light.
 #[inline(always)]
-fn tile_alpha(list: &[u32], proj: &[Projected], cuts: &[f32], rect: Rect, acc: &mut Planes) {
-    let mut trans = [1.0f32; TILE_PIXELS];
+fn tile_alpha(list: &[u32], proj: &[Projected], cuts: &[f32], rect: Rect, acc: &mut Acc) {
+    let mut trans = [1.0f32; ACC_W * TILE_W];
     let mut live = ((rect.x1 - rect.x0) * (rect.y1 - rect.y0)) as usize;
     for &k in list {
         let g = &proj[k as usize];
         let Some(f) = Footprint::of(g, cuts[k as usize], rect) else {
             continue;
         };
-        for chunk in f.chunks() {
+        for start in f.starts() {
             for j in f.ys.clone() {
                 let dy = offset(j, g.mean[1]);
-                let (alpha, _) = f.alphas::<false, true>(chunk, dy);
-                let at = (j - rect.y0) as usize * TILE_W + chunk * LANES;
+                let (alpha, _) = f.alphas::<false, true>(start, dy);
+                let at = (j - rect.y0) as usize * ACC_W + start;
                 let t = &mut trans[at..at + LANES];
                 let mut a = [0f32; LANES];
                 let mut died = 0;
@@ -371,7 +360,7 @@ mod x86 {
         proj: &[Projected],
         cuts: &[f32],
         rect: Rect,
-        acc: &mut Planes,
+        acc: &mut Acc,
     ) {
         match blend {
             Blend::Sum => tile_sum(list, proj, cuts, rect, acc),
@@ -386,7 +375,7 @@ mod x86 {
         proj: &[Projected],
         cuts: &[f32],
         rect: Rect,
-        acc: &mut Planes,
+        acc: &mut Acc,
     ) {
         match blend {
             Blend::Sum => tile_sum(list, proj, cuts, rect, acc),
