@@ -150,18 +150,21 @@ fn offset(i: u32, m: f32) -> f32 {
 /// form) over the rectangle `dx ∈ [dxs[0], dxs[1]]`, `dy ∈ [dys[0], dys[1]]`, in `f64`:
 /// 0 when it holds the centre, else on an edge, where `Q` is a parabola minimized in
 /// closed form. Also the largest magnitude of the terms of `Q` over the rectangle, which
-/// bounds the rounding of a binary32 evaluation.
+/// bounds the rounding of a binary32 evaluation (0 with a least value of 0, which no
+/// margin can fail).
 fn q_min([a, b, c]: [f32; 3], dxs: [f32; 2], dys: [f32; 2]) -> (f64, f64) {
+    // A rectangle that holds the centre (every tile of a Gaussian no larger than a
+    // tile) needs no more.
+    let holds = |r: [f32; 2]| r[0] <= 0.0 && 0.0 <= r[1];
+    if holds(dxs) && holds(dys) {
+        return (0.0, 0.0);
+    }
     let (a, b, c) = (f64::from(a), f64::from(b), f64::from(c));
     let dxs = dxs.map(f64::from);
     let dys = dys.map(f64::from);
     let big = |r: [f64; 2]| r[0].abs().max(r[1].abs());
     let (mx, my) = (big(dxs), big(dys));
     let s = a.abs() * mx * mx + c.abs() * my * my + 2.0 * b.abs() * mx * my;
-    let holds = |r: [f64; 2]| r[0] <= 0.0 && 0.0 <= r[1];
-    if holds(dxs) && holds(dys) {
-        return (0.0, s);
-    }
     let q = |x: f64, y: f64| a * x * x + 2.0 * b * x * y + c * y * y;
     let mut least = f64::INFINITY;
     for x in dxs {
