@@ -95,26 +95,62 @@ impl Footprint<'_> {
     }
 
     /// `(alpha, dx)` on the [`LANES`] columns from tile-local column `start` of the row
-    /// at `dy` from the centre: `alpha` 0 where the Gaussian does not touch the pixel
-    /// (outside the box's columns, `power` out of `[cut, 0]`, `alpha < ALPHA_MIN`). With
-    /// `CAP`, alpha is capped at `ALPHA_MAX` before the threshold, as `alpha` blending does.
+    /// at `dy` from the centre: [`Footprint::weights`] of [`Footprint::powers`].
+    #[cfg(feature = "encode")]
     #[inline(always)]
     pub fn alphas<const F: bool, const CAP: bool>(&self, start: usize, dy: f32) -> (V, V) {
+        let power = self.powers::<F>(start, dy);
+        (
+            self.weights::<F, CAP>(&power, start),
+            self.dxs(start / LANES),
+        )
+    }
+
+    /// `power` on the [`LANES`] columns from tile-local column `start` of the row at `dy`
+    /// from the centre: `-0.5·(A dx² + C dy²) − B dx dy`, in the spec's order.
+    #[inline(always)]
+    pub fn powers<const F: bool>(&self, start: usize, dy: f32) -> V {
         let g = self.g;
         let [ca, cb, cc] = g.conic;
         let cdy = cc * dy * dy;
         let first = self.x0 + start as u32;
-        // The box's columns relative to the chunk's first (negative where it starts before).
-        let at = start as i32;
-        let (lx0, lx1) = (self.lx0 as i32 - at, self.lx1 as i32 - at);
-        let mut alpha = [0f32; LANES];
-        let mut dxs = [0f32; LANES];
-        for l in 0..LANES {
+        std::array::from_fn(|l| {
             let dx = offset(first.wrapping_add(l as u32), g.mean[0]);
-            // -0.5·(A dx² + C dy²) − B dx dy
-            let power = mla::<F>(-0.5, mla::<F>(ca * dx, dx, cdy), -(cb * dx * dy));
+            mla::<F>(-0.5, mla::<F>(ca * dx, dx, cdy), -(cb * dx * dy))
+        })
+    }
+
+    /// Whether a lane of `power` (from `start`) inside the box reaches the cut-off: where
+    /// none does, every weight is 0, and a loop may skip the chunk before the exponential.
+    #[inline(always)]
+    pub fn reaches(&self, power: &V, start: usize) -> bool {
+        let (lx0, lx1) = self.lanes_inside(start);
+        let mut any = false;
+        for (l, &p) in power.iter().enumerate() {
+            // `|`, not `||`: one compare per lane and one reduction, without branches.
+            any |= (l as i32 >= lx0) & ((l as i32) < lx1) & (p >= self.cut);
+        }
+        any
+    }
+
+    /// The box's columns relative to `start` (negative where the box starts before).
+    #[inline(always)]
+    fn lanes_inside(&self, start: usize) -> (i32, i32) {
+        let at = start as i32;
+        (self.lx0 as i32 - at, self.lx1 as i32 - at)
+    }
+
+    /// `alpha` for `power` on the columns from `start`: 0 where the Gaussian does not touch
+    /// the pixel (outside the box's columns, `power` out of `[cut, 0]`, `alpha <
+    /// ALPHA_MIN`). With `CAP`, alpha is capped at `ALPHA_MAX` before the threshold, as
+    /// `alpha` blending does.
+    #[inline(always)]
+    pub fn weights<const F: bool, const CAP: bool>(&self, power: &V, start: usize) -> V {
+        let (lx0, lx1) = self.lanes_inside(start);
+        let mut alpha = [0f32; LANES];
+        for (l, (a_out, &power)) in alpha.iter_mut().zip(power).enumerate() {
             // Every lane with `power` outside `[cut, 0]` is set to 0 below.
-            let mut a = g.opacity * exp_in_range::<F>(power);
+            let mut a = self.g.opacity * exp_in_range::<F>(power);
             if CAP {
                 a = a.min(ALPHA_MAX);
             }
@@ -124,10 +160,9 @@ impl Footprint<'_> {
             a = if power >= self.cut { a } else { 0.0 };
             a = if power <= 0.0 { a } else { 0.0 };
             a = if a >= ALPHA_MIN { a } else { 0.0 };
-            alpha[l] = if inside { a } else { 0.0 };
-            dxs[l] = dx;
+            *a_out = if inside { a } else { 0.0 };
         }
-        (alpha, dxs)
+        alpha
     }
 
     /// The offsets from the centre of the columns of chunk `c`, as [`Footprint::alphas`]
@@ -290,7 +325,11 @@ fn tile_sum(list: &[u32], proj: &[Projected], cuts: &[f32], rect: Rect, acc: &mu
         for start in f.starts() {
             for j in f.ys.clone() {
                 let dy = offset(j, g.mean[1]);
-                let (alpha, _) = f.alphas::<false, false>(start, dy);
+                let power = f.powers::<false>(start, dy);
+                if !f.reaches(&power, start) {
+                    continue;
+                }
+                let alpha = f.weights::<false, false>(&power, start);
                 let at = (j - rect.y0) as usize * ACC_W + start;
                 for (ch, plane) in acc.0.iter_mut().enumerate() {
                     let px = &mut plane[at..at + LANES];
@@ -319,7 +358,11 @@ fn tile_alpha(list: &[u32], proj: &[Projected], cuts: &[f32], rect: Rect, acc: &
         for start in f.starts() {
             for j in f.ys.clone() {
                 let dy = offset(j, g.mean[1]);
-                let (alpha, _) = f.alphas::<false, true>(start, dy);
+                let power = f.powers::<false>(start, dy);
+                if !f.reaches(&power, start) {
+                    continue;
+                }
+                let alpha = f.weights::<false, true>(&power, start);
                 let at = (j - rect.y0) as usize * ACC_W + start;
                 let t = &mut trans[at..at + LANES];
                 let mut a = [0f32; LANES];
