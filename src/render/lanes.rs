@@ -272,10 +272,7 @@ impl Kernel {
         acc: &mut Acc,
     ) {
         match self {
-            Kernel::Portable => match blend {
-                Blend::Sum => tile_sum(list, proj, cuts, rect, acc),
-                Blend::Alpha => tile_alpha(list, proj, cuts, rect, acc),
-            },
+            Kernel::Portable => tile_any(blend, list, proj, cuts, rect, acc),
             #[cfg(target_arch = "x86_64")]
             // SAFETY: `Avx2` and `Avx512` are only made where the CPU has the features
             // (`detect`).
@@ -314,9 +311,102 @@ impl Acc {
     }
 }
 
-/// `sum` blending: `acc += c·alpha` for every Gaussian of the tile, in list order.
+/// What a blend mode does with one chunk of weights. A trait with `#[inline(always)]`
+/// methods rather than a closure: a closure is compiled without the caller's
+/// `#[target_feature]`s and would not be inlined into the AVX builds (a closure here
+/// made the render twice as slow).
+trait Blend8 {
+    /// The weights of `power` on the columns from `start` ([`Footprint::weights`], capped
+    /// where the mode caps them).
+    fn weights(f: &Footprint, power: &V, start: usize) -> V;
+    /// Blend the weights `alpha` of a Gaussian of colour `color` into the chunk at `at`
+    /// of the accumulator's planes.
+    fn chunk(&mut self, acc: &mut Acc, at: usize, color: [f32; 3], alpha: &V);
+    /// Whether no pixel of the tile takes light any more.
+    fn done(&self) -> bool;
+}
+
+/// `sum` blending: `acc += c·alpha`.
+struct Sum;
+
+impl Blend8 for Sum {
+    #[inline(always)]
+    fn weights(f: &Footprint, power: &V, start: usize) -> V {
+        f.weights::<false, false>(power, start)
+    }
+
+    #[inline(always)]
+    fn chunk(&mut self, acc: &mut Acc, at: usize, color: [f32; 3], alpha: &V) {
+        for (ch, plane) in acc.0.iter_mut().enumerate() {
+            let px = &mut plane[at..at + LANES];
+            // Where alpha is 0 this adds ±0, which leaves every sum as it is: a sum that
+            // starts at +0 is never −0.
+            for l in 0..LANES {
+                px[l] += color[ch] * alpha[l];
+            }
+        }
+    }
+
+    #[inline(always)]
+    fn done(&self) -> bool {
+        false
+    }
+}
+
+/// `alpha` blending: front to back, with per-pixel transmittance.
+struct Over {
+    trans: [f32; ACC_W * TILE_W],
+    /// Pixels of the tile still taking light.
+    live: usize,
+}
+
+impl Blend8 for Over {
+    #[inline(always)]
+    fn weights(f: &Footprint, power: &V, start: usize) -> V {
+        f.weights::<false, true>(power, start)
+    }
+
+    #[inline(always)]
+    fn chunk(&mut self, acc: &mut Acc, at: usize, color: [f32; 3], alpha: &V) {
+        let t = &mut self.trans[at..at + LANES];
+        // A pixel that stopped takes nothing more; alpha 0 leaves `t` as it is.
+        let a: V = std::array::from_fn(|l| {
+            if t[l] < TRANSMITTANCE_MIN {
+                0.0
+            } else {
+                alpha[l]
+            }
+        });
+        for (ch, plane) in acc.0.iter_mut().enumerate() {
+            let px = &mut plane[at..at + LANES];
+            for l in 0..LANES {
+                px[l] += color[ch] * a[l] * t[l];
+            }
+        }
+        for l in 0..LANES {
+            let before = t[l];
+            t[l] = before * (1.0 - a[l]);
+            self.live -= usize::from((before >= TRANSMITTANCE_MIN) & (t[l] < TRANSMITTANCE_MIN));
+        }
+    }
+
+    #[inline(always)]
+    fn done(&self) -> bool {
+        self.live == 0
+    }
+}
+
+/// Blend the Gaussians `list` over tile `rect` into `acc` by `B`, in list order: every
+/// chunk of each Gaussian's box that it may touch, rows in order within a chunk.
 #[inline(always)]
-fn tile_sum(list: &[u32], proj: &[Projected], cuts: &[f32], rect: Rect, acc: &mut Acc) {
+fn tile<B: Blend8>(
+    mut blend: B,
+    list: &[u32],
+    proj: &[Projected],
+    cuts: &[f32],
+    rect: Rect,
+    acc: &mut Acc,
+) {
     for &k in list {
         let g = &proj[k as usize];
         let Some(f) = Footprint::of(g, cuts[k as usize], rect) else {
@@ -324,73 +414,39 @@ fn tile_sum(list: &[u32], proj: &[Projected], cuts: &[f32], rect: Rect, acc: &mu
         };
         for start in f.starts() {
             for j in f.ys.clone() {
-                let dy = offset(j, g.mean[1]);
-                let power = f.powers::<false>(start, dy);
+                let power = f.powers::<false>(start, offset(j, g.mean[1]));
                 if !f.reaches(&power, start) {
                     continue;
                 }
-                let alpha = f.weights::<false, false>(&power, start);
-                let at = (j - rect.y0) as usize * ACC_W + start;
-                for (ch, plane) in acc.0.iter_mut().enumerate() {
-                    let px = &mut plane[at..at + LANES];
-                    // Where alpha is 0 this adds ±0, which leaves every sum as it is: a
-                    // sum that starts at +0 is never −0.
-                    for l in 0..LANES {
-                        px[l] += g.color[ch] * alpha[l];
-                    }
-                }
+                let alpha = B::weights(&f, &power, start);
+                blend.chunk(acc, (j - rect.y0) as usize * ACC_W + start, g.color, &alpha);
             }
+        }
+        if blend.done() {
+            break;
         }
     }
 }
 
-/// `alpha` blending: front to back in list order, with per-pixel transmittance; the tile
-/// is done when no pixel of it takes light.
+/// [`tile`] for a blend mode.
 #[inline(always)]
-fn tile_alpha(list: &[u32], proj: &[Projected], cuts: &[f32], rect: Rect, acc: &mut Acc) {
-    let mut trans = [1.0f32; ACC_W * TILE_W];
-    let mut live = ((rect.x1 - rect.x0) * (rect.y1 - rect.y0)) as usize;
-    for &k in list {
-        let g = &proj[k as usize];
-        let Some(f) = Footprint::of(g, cuts[k as usize], rect) else {
-            continue;
-        };
-        for start in f.starts() {
-            for j in f.ys.clone() {
-                let dy = offset(j, g.mean[1]);
-                let power = f.powers::<false>(start, dy);
-                if !f.reaches(&power, start) {
-                    continue;
-                }
-                let alpha = f.weights::<false, true>(&power, start);
-                let at = (j - rect.y0) as usize * ACC_W + start;
-                let t = &mut trans[at..at + LANES];
-                let mut a = [0f32; LANES];
-                let mut died = 0;
-                for l in 0..LANES {
-                    // A pixel that stopped takes nothing more; alpha 0 leaves `t` as it is.
-                    a[l] = if t[l] < TRANSMITTANCE_MIN {
-                        0.0
-                    } else {
-                        alpha[l]
-                    };
-                }
-                for (ch, plane) in acc.0.iter_mut().enumerate() {
-                    let px = &mut plane[at..at + LANES];
-                    for l in 0..LANES {
-                        px[l] += g.color[ch] * a[l] * t[l];
-                    }
-                }
-                for l in 0..LANES {
-                    let before = t[l];
-                    t[l] = before * (1.0 - a[l]);
-                    died += usize::from((before >= TRANSMITTANCE_MIN) & (t[l] < TRANSMITTANCE_MIN));
-                }
-                live -= died;
-            }
-        }
-        if live == 0 {
-            break;
+fn tile_any(
+    blend: Blend,
+    list: &[u32],
+    proj: &[Projected],
+    cuts: &[f32],
+    rect: Rect,
+    acc: &mut Acc,
+) {
+    match blend {
+        Blend::Sum => tile(Sum, list, proj, cuts, rect, acc),
+        Blend::Alpha => {
+            let live = ((rect.x1 - rect.x0) * (rect.y1 - rect.y0)) as usize;
+            let over = Over {
+                trans: [1.0; ACC_W * TILE_W],
+                live,
+            };
+            tile(over, list, proj, cuts, rect, acc)
         }
     }
 }
@@ -409,10 +465,7 @@ mod x86 {
         rect: Rect,
         acc: &mut Acc,
     ) {
-        match blend {
-            Blend::Sum => tile_sum(list, proj, cuts, rect, acc),
-            Blend::Alpha => tile_alpha(list, proj, cuts, rect, acc),
-        }
+        tile_any(blend, list, proj, cuts, rect, acc)
     }
 
     #[target_feature(enable = "avx2,avx512f,avx512vl")]
@@ -424,9 +477,6 @@ mod x86 {
         rect: Rect,
         acc: &mut Acc,
     ) {
-        match blend {
-            Blend::Sum => tile_sum(list, proj, cuts, rect, acc),
-            Blend::Alpha => tile_alpha(list, proj, cuts, rect, acc),
-        }
+        tile_any(blend, list, proj, cuts, rect, acc)
     }
 }
