@@ -80,7 +80,6 @@ impl Footprint<'_> {
     /// (the fit's loops, whose planes are [`TILE`] wide). (Narrowing them row by row to
     /// where the ellipse reaches the cut-off was tried for fitting: a square root and two
     /// divisions per row cost more than the lanes they saved.)
-    #[cfg(feature = "encode")]
     #[inline(always)]
     pub fn chunks(&self) -> std::ops::RangeInclusive<usize> {
         self.lx0 / LANES..=(self.lx1 - 1) / LANES
@@ -95,62 +94,26 @@ impl Footprint<'_> {
     }
 
     /// `(alpha, dx)` on the [`LANES`] columns from tile-local column `start` of the row
-    /// at `dy` from the centre: [`Footprint::weights`] of [`Footprint::powers`].
-    #[cfg(feature = "encode")]
+    /// at `dy` from the centre: `alpha` 0 where the Gaussian does not touch the pixel
+    /// (outside the box's columns, `power` out of `[cut, 0]`, `alpha < ALPHA_MIN`). With
+    /// `CAP`, alpha is capped at `ALPHA_MAX` before the threshold, as `alpha` blending does.
     #[inline(always)]
     pub fn alphas<const F: bool, const CAP: bool>(&self, start: usize, dy: f32) -> (V, V) {
-        let power = self.powers::<F>(start, dy);
-        (
-            self.weights::<F, CAP>(&power, start),
-            self.dxs(start / LANES),
-        )
-    }
-
-    /// `power` on the [`LANES`] columns from tile-local column `start` of the row at `dy`
-    /// from the centre: `-0.5·(A dx² + C dy²) − B dx dy`, in the spec's order.
-    #[inline(always)]
-    pub fn powers<const F: bool>(&self, start: usize, dy: f32) -> V {
         let g = self.g;
         let [ca, cb, cc] = g.conic;
         let cdy = cc * dy * dy;
         let first = self.x0 + start as u32;
-        std::array::from_fn(|l| {
-            let dx = offset(first.wrapping_add(l as u32), g.mean[0]);
-            mla::<F>(-0.5, mla::<F>(ca * dx, dx, cdy), -(cb * dx * dy))
-        })
-    }
-
-    /// Whether a lane of `power` (from `start`) inside the box reaches the cut-off: where
-    /// none does, every weight is 0, and a loop may skip the chunk before the exponential.
-    #[inline(always)]
-    pub fn reaches(&self, power: &V, start: usize) -> bool {
-        let (lx0, lx1) = self.lanes_inside(start);
-        let mut any = false;
-        for (l, &p) in power.iter().enumerate() {
-            // `|`, not `||`: one compare per lane and one reduction, without branches.
-            any |= (l as i32 >= lx0) & ((l as i32) < lx1) & (p >= self.cut);
-        }
-        any
-    }
-
-    /// The box's columns relative to `start` (negative where the box starts before).
-    #[inline(always)]
-    fn lanes_inside(&self, start: usize) -> (i32, i32) {
+        // The box's columns relative to the chunk's first (negative where it starts before).
         let at = start as i32;
-        (self.lx0 as i32 - at, self.lx1 as i32 - at)
-    }
-
-    /// `alpha` for `power` on the columns from `start`: 0 where the Gaussian does not touch
-    /// the pixel (outside the box's columns, `power` out of `[cut, 0]`, `alpha <
-    /// ALPHA_MIN`). With `CAP`, alpha is capped at `ALPHA_MAX` before the threshold, as
-    /// `alpha` blending does.
-    #[inline(always)]
-    pub fn weights<const F: bool, const CAP: bool>(&self, power: &V, start: usize) -> V {
-        let (lx0, lx1) = self.lanes_inside(start);
+        let (lx0, lx1) = (self.lx0 as i32 - at, self.lx1 as i32 - at);
         let mut alpha = [0f32; LANES];
-        for (l, (a_out, &power)) in alpha.iter_mut().zip(power).enumerate() {
+        let mut dxs = [0f32; LANES];
+        for l in 0..LANES {
+            let dx = offset(first.wrapping_add(l as u32), g.mean[0]);
+            // -0.5·(A dx² + C dy²) − B dx dy
+            let power = mla::<F>(-0.5, mla::<F>(ca * dx, dx, cdy), -(cb * dx * dy));
             // Every lane with `power` outside `[cut, 0]` is set to 0 below.
-            let mut a = self.g.opacity * exp_in_range::<F>(power);
+            let mut a = g.opacity * exp_in_range::<F>(power);
             if CAP {
                 a = a.min(ALPHA_MAX);
             }
@@ -160,9 +123,10 @@ impl Footprint<'_> {
             a = if power >= self.cut { a } else { 0.0 };
             a = if power <= 0.0 { a } else { 0.0 };
             a = if a >= ALPHA_MIN { a } else { 0.0 };
-            *a_out = if inside { a } else { 0.0 };
+            alpha[l] = if inside { a } else { 0.0 };
+            dxs[l] = dx;
         }
-        alpha
+        (alpha, dxs)
     }
 
     /// The offsets from the centre of the columns of chunk `c`, as [`Footprint::alphas`]
@@ -185,21 +149,18 @@ fn offset(i: u32, m: f32) -> f32 {
 /// form) over the rectangle `dx ∈ [dxs[0], dxs[1]]`, `dy ∈ [dys[0], dys[1]]`, in `f64`:
 /// 0 when it holds the centre, else on an edge, where `Q` is a parabola minimized in
 /// closed form. Also the largest magnitude of the terms of `Q` over the rectangle, which
-/// bounds the rounding of a binary32 evaluation (0 with a least value of 0, which no
-/// margin can fail).
+/// bounds the rounding of a binary32 evaluation.
 fn q_min([a, b, c]: [f32; 3], dxs: [f32; 2], dys: [f32; 2]) -> (f64, f64) {
-    // A rectangle that holds the centre (every tile of a Gaussian no larger than a
-    // tile) needs no more.
-    let holds = |r: [f32; 2]| r[0] <= 0.0 && 0.0 <= r[1];
-    if holds(dxs) && holds(dys) {
-        return (0.0, 0.0);
-    }
     let (a, b, c) = (f64::from(a), f64::from(b), f64::from(c));
     let dxs = dxs.map(f64::from);
     let dys = dys.map(f64::from);
     let big = |r: [f64; 2]| r[0].abs().max(r[1].abs());
     let (mx, my) = (big(dxs), big(dys));
     let s = a.abs() * mx * mx + c.abs() * my * my + 2.0 * b.abs() * mx * my;
+    let holds = |r: [f64; 2]| r[0] <= 0.0 && 0.0 <= r[1];
+    if holds(dxs) && holds(dys) {
+        return (0.0, s);
+    }
     let q = |x: f64, y: f64| a * x * x + 2.0 * b * x * y + c * y * y;
     let mut least = f64::INFINITY;
     for x in dxs {
@@ -272,7 +233,10 @@ impl Kernel {
         acc: &mut Acc,
     ) {
         match self {
-            Kernel::Portable => tile_any(blend, list, proj, cuts, rect, acc),
+            Kernel::Portable => match blend {
+                Blend::Sum => tile_sum(list, proj, cuts, rect, acc),
+                Blend::Alpha => tile_alpha(list, proj, cuts, rect, acc),
+            },
             #[cfg(target_arch = "x86_64")]
             // SAFETY: `Avx2` and `Avx512` are only made where the CPU has the features
             // (`detect`).
@@ -311,102 +275,9 @@ impl Acc {
     }
 }
 
-/// What a blend mode does with one chunk of weights. A trait with `#[inline(always)]`
-/// methods rather than a closure: a closure is compiled without the caller's
-/// `#[target_feature]`s and would not be inlined into the AVX builds (a closure here
-/// made the render twice as slow).
-trait Blend8 {
-    /// The weights of `power` on the columns from `start` ([`Footprint::weights`], capped
-    /// where the mode caps them).
-    fn weights(f: &Footprint, power: &V, start: usize) -> V;
-    /// Blend the weights `alpha` of a Gaussian of colour `color` into the chunk at `at`
-    /// of the accumulator's planes.
-    fn chunk(&mut self, acc: &mut Acc, at: usize, color: [f32; 3], alpha: &V);
-    /// Whether no pixel of the tile takes light any more.
-    fn done(&self) -> bool;
-}
-
-/// `sum` blending: `acc += c·alpha`.
-struct Sum;
-
-impl Blend8 for Sum {
-    #[inline(always)]
-    fn weights(f: &Footprint, power: &V, start: usize) -> V {
-        f.weights::<false, false>(power, start)
-    }
-
-    #[inline(always)]
-    fn chunk(&mut self, acc: &mut Acc, at: usize, color: [f32; 3], alpha: &V) {
-        for (ch, plane) in acc.0.iter_mut().enumerate() {
-            let px = &mut plane[at..at + LANES];
-            // Where alpha is 0 this adds ±0, which leaves every sum as it is: a sum that
-            // starts at +0 is never −0.
-            for l in 0..LANES {
-                px[l] += color[ch] * alpha[l];
-            }
-        }
-    }
-
-    #[inline(always)]
-    fn done(&self) -> bool {
-        false
-    }
-}
-
-/// `alpha` blending: front to back, with per-pixel transmittance.
-struct Over {
-    trans: [f32; ACC_W * TILE_W],
-    /// Pixels of the tile still taking light.
-    live: usize,
-}
-
-impl Blend8 for Over {
-    #[inline(always)]
-    fn weights(f: &Footprint, power: &V, start: usize) -> V {
-        f.weights::<false, true>(power, start)
-    }
-
-    #[inline(always)]
-    fn chunk(&mut self, acc: &mut Acc, at: usize, color: [f32; 3], alpha: &V) {
-        let t = &mut self.trans[at..at + LANES];
-        // A pixel that stopped takes nothing more; alpha 0 leaves `t` as it is.
-        let a: V = std::array::from_fn(|l| {
-            if t[l] < TRANSMITTANCE_MIN {
-                0.0
-            } else {
-                alpha[l]
-            }
-        });
-        for (ch, plane) in acc.0.iter_mut().enumerate() {
-            let px = &mut plane[at..at + LANES];
-            for l in 0..LANES {
-                px[l] += color[ch] * a[l] * t[l];
-            }
-        }
-        for l in 0..LANES {
-            let before = t[l];
-            t[l] = before * (1.0 - a[l]);
-            self.live -= usize::from((before >= TRANSMITTANCE_MIN) & (t[l] < TRANSMITTANCE_MIN));
-        }
-    }
-
-    #[inline(always)]
-    fn done(&self) -> bool {
-        self.live == 0
-    }
-}
-
-/// Blend the Gaussians `list` over tile `rect` into `acc` by `B`, in list order: every
-/// chunk of each Gaussian's box that it may touch, rows in order within a chunk.
+/// `sum` blending: `acc += c·alpha` for every Gaussian of the tile, in list order.
 #[inline(always)]
-fn tile<B: Blend8>(
-    mut blend: B,
-    list: &[u32],
-    proj: &[Projected],
-    cuts: &[f32],
-    rect: Rect,
-    acc: &mut Acc,
-) {
+fn tile_sum(list: &[u32], proj: &[Projected], cuts: &[f32], rect: Rect, acc: &mut Acc) {
     for &k in list {
         let g = &proj[k as usize];
         let Some(f) = Footprint::of(g, cuts[k as usize], rect) else {
@@ -414,39 +285,65 @@ fn tile<B: Blend8>(
         };
         for start in f.starts() {
             for j in f.ys.clone() {
-                let power = f.powers::<false>(start, offset(j, g.mean[1]));
-                if !f.reaches(&power, start) {
-                    continue;
+                let dy = offset(j, g.mean[1]);
+                let (alpha, _) = f.alphas::<false, false>(start, dy);
+                let at = (j - rect.y0) as usize * ACC_W + start;
+                for (ch, plane) in acc.0.iter_mut().enumerate() {
+                    let px = &mut plane[at..at + LANES];
+                    // Where alpha is 0 this adds ±0, which leaves every sum as it is: a
+                    // sum that starts at +0 is never −0.
+                    for l in 0..LANES {
+                        px[l] += g.color[ch] * alpha[l];
+                    }
                 }
-                let alpha = B::weights(&f, &power, start);
-                blend.chunk(acc, (j - rect.y0) as usize * ACC_W + start, g.color, &alpha);
             }
-        }
-        if blend.done() {
-            break;
         }
     }
 }
 
-/// [`tile`] for a blend mode.
+/// `alpha` blending: front to back in list order, with per-pixel transmittance; the tile
+/// is done when no pixel of it takes light.
 #[inline(always)]
-fn tile_any(
-    blend: Blend,
-    list: &[u32],
-    proj: &[Projected],
-    cuts: &[f32],
-    rect: Rect,
-    acc: &mut Acc,
-) {
-    match blend {
-        Blend::Sum => tile(Sum, list, proj, cuts, rect, acc),
-        Blend::Alpha => {
-            let live = ((rect.x1 - rect.x0) * (rect.y1 - rect.y0)) as usize;
-            let over = Over {
-                trans: [1.0; ACC_W * TILE_W],
-                live,
-            };
-            tile(over, list, proj, cuts, rect, acc)
+fn tile_alpha(list: &[u32], proj: &[Projected], cuts: &[f32], rect: Rect, acc: &mut Acc) {
+    let mut trans = [1.0f32; ACC_W * TILE_W];
+    let mut live = ((rect.x1 - rect.x0) * (rect.y1 - rect.y0)) as usize;
+    for &k in list {
+        let g = &proj[k as usize];
+        let Some(f) = Footprint::of(g, cuts[k as usize], rect) else {
+            continue;
+        };
+        for start in f.starts() {
+            for j in f.ys.clone() {
+                let dy = offset(j, g.mean[1]);
+                let (alpha, _) = f.alphas::<false, true>(start, dy);
+                let at = (j - rect.y0) as usize * ACC_W + start;
+                let t = &mut trans[at..at + LANES];
+                let mut a = [0f32; LANES];
+                let mut died = 0;
+                for l in 0..LANES {
+                    // A pixel that stopped takes nothing more; alpha 0 leaves `t` as it is.
+                    a[l] = if t[l] < TRANSMITTANCE_MIN {
+                        0.0
+                    } else {
+                        alpha[l]
+                    };
+                }
+                for (ch, plane) in acc.0.iter_mut().enumerate() {
+                    let px = &mut plane[at..at + LANES];
+                    for l in 0..LANES {
+                        px[l] += g.color[ch] * a[l] * t[l];
+                    }
+                }
+                for l in 0..LANES {
+                    let before = t[l];
+                    t[l] = before * (1.0 - a[l]);
+                    died += usize::from((before >= TRANSMITTANCE_MIN) & (t[l] < TRANSMITTANCE_MIN));
+                }
+                live -= died;
+            }
+        }
+        if live == 0 {
+            break;
         }
     }
 }
@@ -465,7 +362,10 @@ mod x86 {
         rect: Rect,
         acc: &mut Acc,
     ) {
-        tile_any(blend, list, proj, cuts, rect, acc)
+        match blend {
+            Blend::Sum => tile_sum(list, proj, cuts, rect, acc),
+            Blend::Alpha => tile_alpha(list, proj, cuts, rect, acc),
+        }
     }
 
     #[target_feature(enable = "avx2,avx512f,avx512vl")]
@@ -477,6 +377,9 @@ mod x86 {
         rect: Rect,
         acc: &mut Acc,
     ) {
-        tile_any(blend, list, proj, cuts, rect, acc)
+        match blend {
+            Blend::Sum => tile_sum(list, proj, cuts, rect, acc),
+            Blend::Alpha => tile_alpha(list, proj, cuts, rect, acc),
+        }
     }
 }
