@@ -80,6 +80,7 @@ impl Footprint<'_> {
     /// (the fit's loops, whose planes are [`TILE`] wide). (Narrowing them row by row to
     /// where the ellipse reaches the cut-off was tried for fitting: a square root and two
     /// divisions per row cost more than the lanes they saved.)
+    #[cfg(feature = "encode")]
     #[inline(always)]
     pub fn chunks(&self) -> std::ops::RangeInclusive<usize> {
         self.lx0 / LANES..=(self.lx1 - 1) / LANES
