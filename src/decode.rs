@@ -67,6 +67,42 @@ pub fn decode<R: Read>(input: R, width: u32, height: u32) -> Result<Image> {
     })
 }
 
+/// The size to render at when a caller names a width, a height, both or neither: a
+/// missing side follows the stored aspect ratio `stored` (rounded to the nearest pixel, at
+/// least 1), and neither gives the stored size. `gsi decode --width/--height` and the
+/// Python package's `decode` size their output this way. An error where a side would not
+/// fit in a `u32`; the size itself is checked when it is rendered.
+///
+/// ```
+/// assert_eq!(gsi::scaled_size((768, 512), Some(300), None)?, (300, 200));
+/// assert_eq!(gsi::scaled_size((768, 512), None, Some(100))?, (150, 100));
+/// assert_eq!(gsi::scaled_size((768, 512), None, None)?, (768, 512));
+/// # Ok::<(), gsi::Error>(())
+/// ```
+pub fn scaled_size(
+    stored: (u32, u32),
+    width: Option<u32>,
+    height: Option<u32>,
+) -> Result<(u32, u32)> {
+    let (w, h) = (f64::from(stored.0), f64::from(stored.1));
+    let side = |x: f64| -> Result<u32> {
+        if x.is_finite() && x < f64::from(u32::MAX) {
+            Ok((x.round() as u32).max(1))
+        } else {
+            Err(Error::new(
+                ErrorKind::LimitExceeded,
+                format!("output size {x} is out of range"),
+            ))
+        }
+    };
+    match (width, height) {
+        (Some(ow), Some(oh)) => Ok((ow, oh)),
+        (Some(ow), None) => Ok((ow, side(f64::from(ow) * h / w.max(1.0))?)),
+        (None, Some(oh)) => Ok((side(f64::from(oh) * w / h.max(1.0))?, oh)),
+        (None, None) => Ok(stored),
+    }
+}
+
 /// A read `.gsi` file, ready to render into buffers of the caller's at any size.
 ///
 /// ```

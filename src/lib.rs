@@ -87,7 +87,7 @@
 
 // The layers, lowest first (README "Layers"; `tools/check-layers.py` keeps them one-way):
 // contract -> model -> format -> render -> decode, gpu -> {optim, metrics} -> fit, enhance
-// -> capi, image_support. The command-line tool (`cli/`) is an application on top.
+// -> capi, image_support, info. The command-line tool (`cli/`) is an application on top.
 // (rustfmt sorts the declarations below; the order above is the one that matters.)
 pub mod contract;
 mod decode;
@@ -98,6 +98,8 @@ pub mod format;
 pub mod gpu;
 #[cfg(feature = "image")]
 pub mod image_support;
+#[cfg(feature = "info")]
+pub mod info;
 pub mod model;
 pub mod render;
 
@@ -122,7 +124,7 @@ pub mod synth;
 #[cfg(feature = "capi")]
 pub mod capi;
 
-pub use decode::{decode, Image, PixelFormat, Reader};
+pub use decode::{decode, scaled_size, Image, PixelFormat, Reader};
 #[cfg(feature = "encode")]
 pub use device::Device;
 pub use format::{Error, ErrorKind, Header, Limits, Result};

@@ -60,10 +60,7 @@ fn output_size(w: u32, h: u32, args: &Args) -> Result<(u32, u32), Failure> {
             Err(Failure(format!("scale {s} must be positive")))
         }
         (_, _, Some(s)) => Ok((fit(wf * s)?, fit(hf * s)?)),
-        (Some(ow), Some(oh), None) => Ok((ow, oh)),
-        (Some(ow), None, None) => Ok((ow, fit(f64::from(ow) * hf / wf)?.max(1))),
-        (None, Some(oh), None) => Ok((fit(f64::from(oh) * wf / hf)?.max(1), oh)),
-        (None, None, None) => Ok((w, h)),
+        (width, height, None) => Ok(gsi::scaled_size((w, h), width, height)?),
     }
 }
 

@@ -92,24 +92,25 @@ enum BlendArg {
 
 /// Load an image (any format [`image_io::open`] reads, upright) as RGB in `[0, 1]`,
 /// converting grey, alpha and 16-bit explicitly: grey is replicated, alpha is dropped (the
-/// image is taken as composited), 16-bit values are scaled by 1/65535.
+/// image is taken as composited), 8- and 16-bit samples become `f32` as
+/// [`gsi::RgbImage::from_rgb8`] and [`gsi::RgbImage::from_rgb16`] say (the Python package
+/// takes arrays the same way), and float images are taken as they are.
 pub fn load_image(path: &Path) -> Result<Target, Failure> {
+    use image::DynamicImage as D;
     let img = image_io::open(path)?;
     let (width, height) = (img.width(), img.height());
-    let data: Vec<f32> = if img.color().bytes_per_pixel() / img.color().channel_count() > 1 {
-        img.into_rgb32f().into_raw()
-    } else {
-        img.into_rgb8()
-            .into_raw()
-            .into_iter()
-            .map(|v| f32::from(v) / 255.0)
-            .collect()
+    let target = match img {
+        D::ImageRgb32F(_) | D::ImageRgba32F(_) => Some(Target {
+            width,
+            height,
+            data: img.into_rgb32f().into_raw(),
+        }),
+        D::ImageLuma16(_) | D::ImageLumaA16(_) | D::ImageRgb16(_) | D::ImageRgba16(_) => {
+            Target::from_rgb16(width, height, &img.into_rgb16().into_raw())
+        }
+        _ => Target::from_rgb8(width, height, &img.into_rgb8().into_raw()),
     };
-    Ok(Target {
-        width,
-        height,
-        data,
-    })
+    target.ok_or_else(|| Failure(format!("{}: {width}x{height} is too large", path.display())))
 }
 
 /// Resolution of the work bar.

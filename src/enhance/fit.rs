@@ -80,6 +80,56 @@ impl Default for EnhanceOptions {
     }
 }
 
+impl EnhanceOptions {
+    /// What [`super::enhance`] refuses before it reads any colour: no iterations, a count
+    /// of experts outside `1..=MAX_EXPERTS`, a learning rate that is not positive, loss
+    /// weights that are negative or not finite, an exposure outside `(0, 1)`, a tone-curve
+    /// exponent outside `(0, MAX_TONE_EXPONENT]`, an empty working size. The message names
+    /// the field.
+    pub fn check(&self) -> Result<(), String> {
+        let max_experts = usize::from(MAX_EXPERTS);
+        let max_tone = crate::format::MAX_TONE_EXPONENT;
+        if self.iterations == 0 {
+            return Err("iterations must be at least 1".into());
+        }
+        if !(1..=max_experts).contains(&self.experts) {
+            return Err(format!(
+                "experts {} must be in 1..={max_experts}",
+                self.experts
+            ));
+        }
+        if !(self.learning_rate.is_finite() && self.learning_rate > 0.0) {
+            return Err(format!(
+                "learning rate {} must be positive",
+                self.learning_rate
+            ));
+        }
+        let w = self.weights.to_array();
+        if !w.iter().all(|x| x.is_finite() && *x >= 0.0) {
+            return Err(format!(
+                "loss weights {w:?} must be finite and non-negative"
+            ));
+        }
+        if let Exposure::Exactly(e) = self.exposure {
+            if !(e > 0.0 && e < 1.0) {
+                return Err(format!("exposure {e} must be a mean luma in (0, 1)"));
+            }
+        }
+        if let Some(c) = &self.curve {
+            if !(c.exponent > 0.0 && c.exponent <= max_tone) {
+                return Err(format!(
+                    "tone exponent {} must be in (0, {max_tone}]",
+                    c.exponent
+                ));
+            }
+        }
+        if self.work_side == 0 || self.cell == 0 || self.hidden == 0 || self.head_hidden == 0 {
+            return Err("the working size, cell and hidden widths must be at least 1".into());
+        }
+        Ok(())
+    }
+}
+
 /// Reported every iteration.
 #[derive(Clone, Copy, Debug)]
 pub struct Progress {

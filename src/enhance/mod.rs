@@ -159,7 +159,9 @@ pub struct Enhanced {
 /// Stage 2's front door: enhance `file` (from its original colours, when it was
 /// enhanced before and kept them), with the mixture on `device`.
 ///
-/// Unless `opts.force`, a file is left as it is when less than a quarter of the image
+/// Options that [`fit::EnhanceOptions::check`] refuses are an
+/// [`ErrorKind::InvalidValue`](crate::format::ErrorKind::InvalidValue) error. Unless
+/// `opts.force`, a file is left as it is when less than a quarter of the image
 /// is under-exposed ([`assess`], [`Outcome::NotLowLight`]) and when it was enhanced before
 /// without keeping its original colours ([`Outcome::OriginalDiscarded`]). Otherwise the
 /// colours are denoised (`opts.denoise`), the mixture is fitted ([`fit::fit`]), and the
@@ -176,6 +178,8 @@ pub fn enhance(
     device: crate::Device<'_>,
     progress: &mut dyn FnMut(&fit::Progress),
 ) -> Result<Outcome> {
+    opts.check()
+        .map_err(|why| crate::format::Error::new(crate::format::ErrorKind::InvalidValue, why))?;
     let enhanced_before = file
         .chunks
         .iter()

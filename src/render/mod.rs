@@ -50,6 +50,35 @@ pub struct RgbImage {
 }
 
 impl RgbImage {
+    /// An image from 8-bit RGB samples (`width·height·3` of them, rows top to bottom),
+    /// each `v / 255` in `f32`: how every front end (the command-line tool, the Python
+    /// package) hands an 8-bit image to the encoder, so that the same pixels give the same
+    /// file. `None` where the count does not match the size.
+    pub fn from_rgb8(width: u32, height: u32, samples: &[u8]) -> Option<RgbImage> {
+        Self::from_samples(width, height, samples, |v| f32::from(v) / 255.0)
+    }
+
+    /// An image from 16-bit RGB samples, each `v / 65535` in `f32` (as [`Self::from_rgb8`]).
+    pub fn from_rgb16(width: u32, height: u32, samples: &[u16]) -> Option<RgbImage> {
+        Self::from_samples(width, height, samples, |v| f32::from(v) / 65535.0)
+    }
+
+    fn from_samples<T: Copy>(
+        width: u32,
+        height: u32,
+        samples: &[T],
+        to_f32: impl Fn(T) -> f32,
+    ) -> Option<RgbImage> {
+        let n = (width as usize)
+            .checked_mul(height as usize)?
+            .checked_mul(3)?;
+        (samples.len() == n).then(|| RgbImage {
+            width,
+            height,
+            data: samples.iter().map(|&v| to_f32(v)).collect(),
+        })
+    }
+
     /// 8-bit RGB, three bytes per pixel.
     ///
     /// Each channel is clamped to `[0, 1]`, then mapped to `floor(c·255 + 0.5)`
