@@ -1,5 +1,5 @@
 //! Time and PSNR of one encoder configuration on a few images: how the effort levels were
-//! chosen on a validation set (BENCHMARKS.md, session 8).
+//! chosen on a validation set (BENCHMARKS.md, effort levels).
 //!
 //! ```sh
 //! cargo run --release -p gsi-cli --example effort_probe -- STEPS COARSE_SHARE FACTOR SOLVE IMAGE...
@@ -8,10 +8,10 @@
 //! Each image is encoded at 1 bpp on the CPU, one after another; a line per image, then the
 //! mean PSNR and median time. `COARSE_SHARE` 0 (or `FACTOR` 1) fits at full resolution only.
 //! `GSI_PROBE_LR=F` multiplies every learning rate by `F` (how the rates of the levels
-//! were checked, BENCHMARKS.md, session 10). `GSI_PROBE_CURVE=1` prints every progress
+//! were checked, BENCHMARKS.md, learning rates for short fits). `GSI_PROBE_CURVE=1` prints every progress
 //! report (step, Gaussians, PSNR, seconds since the start), to see where a fit's time goes.
 //! `GSI_PROBE_STORED=0` leaves the stored colours as the last step left them (no final
-//! colour solve: the encoder before session 13). `GSI_PROBE_BITS=C,A,K` sets the
+//! colour solve, as the effort report's reference). `GSI_PROBE_BITS=C,A,K` sets the
 //! covariance, angle and colour depths (the position's stays the default for the size);
 //! `GSI_PROBE_BPP=B` the budget (default 1); `GSI_PROBE_BLEND=alpha` fits in `alpha` mode.
 

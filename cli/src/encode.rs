@@ -26,9 +26,9 @@ pub struct Args {
     /// on a GPU).
     #[arg(long, value_name = "N")]
     jobs: Option<usize>,
-    /// Number of Gaussians.
-    #[arg(long, group = "budget")]
-    gaussians: Option<usize>,
+    /// Number of Gaussians (at least 1).
+    #[arg(long, group = "budget", value_parser = clap::value_parser!(u32).range(1..))]
+    gaussians: Option<u32>,
     /// Target size in bits per pixel (the file is shrunk until it fits).
     #[arg(long, group = "budget")]
     bpp: Option<f32>,
@@ -123,7 +123,7 @@ const IMAGE_EXTENSIONS: &[&str] = &[
 
 fn options(args: &Args) -> Result<EncodeOptions, Failure> {
     let budget = match (args.gaussians, args.bpp, args.target_psnr) {
-        (Some(n), _, _) => Budget::Gaussians(n),
+        (Some(n), _, _) => Budget::Gaussians(n as usize),
         (_, Some(b), _) if b.is_finite() && b > 0.0 => Budget::Bpp(b),
         (_, Some(b), _) => return Err(Failure(format!("--bpp {b} must be positive"))),
         (_, _, Some(p)) if p.is_finite() && p > 0.0 => Budget::TargetPsnr(p),

@@ -17,11 +17,13 @@ const READS: &str = "PNG, JPEG, BMP, TIFF, WebP or PNM";
 /// bounded by the `image` crate's default limits (512 MiB per allocation).
 pub fn open(path: &Path) -> Result<DynamicImage, Failure> {
     let named = |e: &dyn std::fmt::Display| Failure(format!("{}: {e}", path.display()));
+    let mut stdin = None;
     let reader = if path == Path::new("-") {
         let mut bytes = Vec::new();
         io::open_input(path)
             .and_then(|mut r| r.read_to_end(&mut bytes))
             .map_err(|e| named(&e))?;
+        stdin = Some(bytes.clone());
         ImageReader::new(Box::new(Cursor::new(bytes)) as Box<dyn ReadSeek>)
     } else {
         let file = std::fs::File::open(path).map_err(|e| named(&e))?;
@@ -30,6 +32,17 @@ pub fn open(path: &Path) -> Result<DynamicImage, Failure> {
     let reader = reader.with_guessed_format().map_err(|e| named(&e))?;
     if reader.format().is_none() {
         return Err(named(&format_args!("not an image gsi reads ({READS})")));
+    }
+    // The JPEG decoder fills a stream cut short with grey and says nothing; a damaged
+    // photograph is refused here instead of being fitted, missing half, without a word.
+    if reader.format() == Some(image::ImageFormat::Jpeg) {
+        let bytes = match &stdin {
+            Some(b) => b.clone(),
+            None => std::fs::read(path).map_err(|e| named(&e))?,
+        };
+        if !jpeg_reaches_its_end(&bytes) {
+            return Err(named(&"the JPEG data ends before its end-of-image marker: the file is truncated or damaged"));
+        }
     }
     let described = |e: image::ImageError| match e {
         image::ImageError::Unsupported(u) => named(&format_args!("{u} (gsi reads {READS})")),
@@ -43,6 +56,93 @@ pub fn open(path: &Path) -> Result<DynamicImage, Failure> {
     let mut img = DynamicImage::from_decoder(decoder).map_err(described)?;
     img.apply_orientation(orientation);
     Ok(img)
+}
+
+/// Whether a JPEG stream (ITU-T T.81 §B.1) reaches its end-of-image marker: the segments
+/// from the start-of-image marker are walked by their lengths, each scan's entropy-coded
+/// data up to the next marker that is not a restart (`FF 00` is a stuffed byte, `FF FF`
+/// fill), until `FF D9`. A stream that runs out first was cut short. Bytes after the
+/// marker (some cameras append data) are not looked at.
+fn jpeg_reaches_its_end(b: &[u8]) -> bool {
+    if !b.starts_with(&[0xFF, 0xD8]) {
+        return false;
+    }
+    let mut i = 2;
+    loop {
+        if b.get(i) != Some(&0xFF) {
+            return false;
+        }
+        while b.get(i) == Some(&0xFF) {
+            i += 1;
+        }
+        let Some(&marker) = b.get(i) else {
+            return false;
+        };
+        i += 1;
+        match marker {
+            0xD9 => return true,
+            0x01 | 0xD0..=0xD7 => continue,
+            _ => {}
+        }
+        let Some(len) = b
+            .get(i..i + 2)
+            .map(|l| usize::from(u16::from_be_bytes([l[0], l[1]])))
+        else {
+            return false;
+        };
+        if len < 2 || i + len > b.len() {
+            return false;
+        }
+        i += len;
+        if marker == 0xDA {
+            // Entropy-coded data runs to the next marker other than RSTn.
+            loop {
+                let Some(at) = b[i..].iter().position(|&x| x == 0xFF) else {
+                    return false;
+                };
+                let j = i + at;
+                match b.get(j + 1) {
+                    None => return false,
+                    Some(0x00 | 0xD0..=0xD7 | 0xFF) => i = j + 1,
+                    Some(_) => {
+                        i = j;
+                        break;
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::jpeg_reaches_its_end;
+
+    /// A JPEG of `w`×`h` noise from the `image` crate's encoder.
+    fn jpeg(w: u32, h: u32) -> Vec<u8> {
+        let px: Vec<u8> = (0..w * h * 3)
+            .map(|i| (i.wrapping_mul(2_654_435_761) >> 24) as u8)
+            .collect();
+        let mut out = Vec::new();
+        image::codecs::jpeg::JpegEncoder::new_with_quality(&mut out, 90)
+            .encode(&px, w, h, image::ExtendedColorType::Rgb8)
+            .unwrap();
+        out
+    }
+
+    #[test]
+    fn a_whole_jpeg_reaches_its_end_and_a_cut_one_does_not() {
+        let whole = jpeg(64, 48);
+        assert!(jpeg_reaches_its_end(&whole));
+        let mut trailing = whole.clone();
+        trailing.extend_from_slice(b"appended by a camera");
+        assert!(jpeg_reaches_its_end(&trailing));
+        for cut in [2, 3, 20, whole.len() / 2, whole.len() - 2, whole.len() - 1] {
+            assert!(!jpeg_reaches_its_end(&whole[..cut]), "cut at {cut}");
+        }
+        assert!(!jpeg_reaches_its_end(b"not a jpeg"));
+        assert!(!jpeg_reaches_its_end(&[]));
+    }
 }
 
 /// A seekable reader, for the decoders that need to seek (TIFF).

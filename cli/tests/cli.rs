@@ -169,6 +169,9 @@ fn junk_input_is_refused() {
 fn usage_errors_exit_2() {
     assert_eq!(gsi(&["decode"]).status.code(), Some(2));
     assert_eq!(gsi(&["frobnicate"]).status.code(), Some(2));
+    // No Gaussians is a usage error, not a file of one Gaussian.
+    let out = gsi(&["encode", "x.png", "-o", "x.gsi", "--gaussians", "0"]);
+    assert_eq!(out.status.code(), Some(2));
     let p = corpus("valid")[0].to_str().unwrap().to_owned();
     assert_eq!(
         gsi(&["decode", &p, "-o", "x.png", "--scale", "2", "--width", "3"])
@@ -624,6 +627,22 @@ fn encode_reads_the_formats_people_have() {
         let b = encode_small(&t, &dir.join(format!("{name}-tif.gsi")));
         assert!(a == b, "{name}: TIFF and PNG differ");
     }
+    // A JPEG cut short is refused in one line, not fitted with its missing part filled in.
+    let jpg = dir.join("whole.jpg");
+    img.save(&jpg).unwrap();
+    encode_small(&jpg, &dir.join("j.gsi"));
+    let bytes = std::fs::read(&jpg).unwrap();
+    let cut = dir.join("cut.jpg");
+    std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
+    let out = gsi(&[
+        "encode",
+        cut.to_str().unwrap(),
+        "-o",
+        dir.join("c.gsi").to_str().unwrap(),
+    ]);
+    assert_refused(&out, "truncated jpeg");
+    assert!(String::from_utf8_lossy(&out.stderr).contains("truncated"));
+    assert!(!dir.join("c.gsi").exists());
     // A format gsi does not read is refused by name, with what it does read.
     let gif = dir.join("a.gif");
     std::fs::write(&gif, b"GIF89a\x01\x00\x01\x00\x00\x00\x00;").unwrap();

@@ -25,7 +25,7 @@ use crate::model::{Blend, Scene};
 /// pairs add little each, but a large, dense scene has thousands of them per Gaussian:
 /// at 1/256 a 10.7-megapixel file of 278 000 Gaussians passed the search's memory
 /// budget, while LOL eval15 and the synthetic Kodak set scored the same at either
-/// threshold (BENCHMARKS.md, session 15).
+/// threshold (BENCHMARKS.md, the denoising threshold).
 pub const NEAR_MIN: f32 = 1.0 / 16.0;
 
 /// Least value of a footprint at a centre for it to count in the value there (spec
@@ -378,7 +378,7 @@ pub struct DenoiseOptions {
     pub passes: u8,
 }
 
-/// One pass since the tone curve (session 16): with it, a second pass cost the synthetic
+/// One pass, because the tone curve follows: with it, a second pass cost the synthetic
 /// Kodak set 0.21 dB and 0.007 SSIM and eval15 0.02 dB, flattening dark texture that the
 /// curve then lifts into view (BENCHMARKS.md); 2 passes were chosen without it.
 #[cfg(feature = "encode")]

@@ -14,20 +14,20 @@ pub struct Effort(u8);
 /// Steps, coarse steps' share (at half resolution; 0 for none) and colour-solve
 /// iterations of each level, chosen on LOL eval15's 15 normal-light images at 1 bpp (not
 /// Kodak, which the report scores). Since the optimizer's state carries over from the
-/// coarse steps to the full-resolution ones (session 12), a half-resolution first half
+/// coarse steps to the full-resolution ones, a half-resolution first half
 /// wins at every length tried: 600 steps so scored +0.09 dB over 600 at full resolution
 /// in 31 % less time, 1200 steps +0.04 dB over a quarter coarse; before, a fresh optimizer
-/// at full resolution lost the coarse start's lead past about 13 s (session 8). The
+/// at full resolution lost the coarse start's lead past about 13 s. The
 /// fastest level is the fewest steps that stay within 1 dB of the fit before levels (400
 /// full-resolution steps at the old rates, 32.59 dB there): 120 steps are 0.65 dB under
 /// it, 100 steps 1.01 dB. The default, 600 steps, is the level that gains at least 1 dB
 /// over that fit (+1.16 dB) in the time the 400 full-resolution steps of the default
-/// before took, and fits a 12 MP photograph within 5 minutes (BENCHMARKS.md, session 12).
-/// The final colour solve of session 13 lifted every level (validation: effort 1 −0.52 dB,
+/// before took, and fits a 12 MP photograph within 5 minutes (BENCHMARKS.md, effort
+/// levels). The final colour solve lifted every level (validation: effort 1 −0.52 dB,
 /// the default +1.51 dB from the same reference). The levels were left as they were: 100
 /// steps would now pass the 1 dB rule too (−0.90 dB), but with less than half effort 1's
-/// margin, and on Kodak effort 1 has sat further below the reference than here (session
-/// 12: −0.80 dB against −0.65; session 13: −0.70 dB against −0.52).
+/// margin, and on Kodak effort 1 has sat further below the reference than here (−0.80 dB
+/// against −0.65 before the final solve, −0.70 dB against −0.52 with it).
 const LEVELS: [(u32, f32, u32); 9] = [
     (120, 0.5, 8),
     (200, 0.5, 10),

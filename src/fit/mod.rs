@@ -89,7 +89,8 @@ pub struct EncodeOptions {
     /// and re-placement); the first solve and the last take twice as many.
     pub color_solve: u32,
     /// Whether the stored colours are solved again for the quantized geometry, after the
-    /// last step (off: the encoder before session 13, as the effort report's reference).
+    /// last step (off: the stored colours as the last step left them, the effort report's
+    /// reference; on, +0.35 dB at the default level on the validation images).
     pub solve_stored_colors: bool,
     /// Fit a dark image brightened to full scale and store its colours divided by the
     /// gain ([`dark`]), so that its shadows get Gaussians too. Images whose bright end
@@ -112,7 +113,8 @@ pub struct Coarse {
 /// 0.005, 0.01), which are set for tens of thousands of steps; a level takes 160 to 1600.
 /// One factor for all, checked on 8 of LOL eval15's normal-light images at 1 bpp (not
 /// Kodak, which the report scores): ×2 to ×8 all beat ×1 at 60, 200, 400 and 800 steps,
-/// ×6 by +0.47, +0.93, +0.37 and +0.14 dB; ×12 falls back (BENCHMARKS.md, session 10).
+/// ×6 by +0.47, +0.93, +0.37 and +0.14 dB; ×12 falls back (BENCHMARKS.md, learning rates
+/// for short fits).
 pub const LEARNING_RATES: LearningRates = LearningRates {
     position: 1.2e-3,
     log_scale: 0.06,
@@ -127,7 +129,8 @@ pub const LEARNING_RATES: LearningRates = LearningRates {
 /// a Kodak image, where in normalized units as such it moved 4.8 pixels a step on a
 /// 4000-pixel side. Kept on that principle: on the scale table's smooth renders, where
 /// quantization decides the stored PSNR, it moved effort 1 by +0.6 to +1.4 dB and
-/// effort 5 by −1.2 to +0.05 dB (BENCHMARKS.md, session 10). 768 is Kodak's side, so the
+/// effort 5 by −1.2 to +0.05 dB (BENCHMARKS.md, learning rates for short fits). 768 is
+/// Kodak's side, so the
 /// Kodak figures stand; the rates were checked on 600-pixel images, which keep theirs.
 pub const RATE_SIDE: u32 = 768;
 
@@ -202,19 +205,19 @@ pub struct Encoded {
 /// and in `sum` mode covariance log-scales 6 bits. Chosen on LOL eval15's normal-light
 /// images (not Kodak, which the report scores) at 0.5 and 1 bpp, where coarser codes buy
 /// more Gaussians within the budget:
-/// * Positions 12 or 13 bits and covariance and colour 6 to 9 bits (BENCHMARKS.md,
-///   session 6): 1/4 pixel was as good as 1/8, and colour below 8 bits lost more than
-///   the extra Gaussians bought back. In session 14, 6-bit colour lost 0.8 dB again and
+/// * Positions 12 or 13 bits and covariance and colour 6 to 9 bits (BENCHMARKS.md, bit
+///   depths chosen on a validation set): 1/4 pixel was as good as 1/8, and colour below 8
+///   bits lost more than the extra Gaussians bought back. With 6-bit scales, 6-bit colour
+///   lost 0.8 dB again and
 ///   7 bits tied with 8 (within ±0.04 dB), so the colour keeps 8 bits: the finer steps
 ///   that stage 2's rewritten colours also use.
-/// * The scales went from 8 to 6 bits in session 14 (+0.23 dB at 1 bpp, +0.17 at
-///   0.5, and +0.24 at effort 1): since session 13 the stored colours are solved for the
-///   stored geometry, which absorbs most of what coarser scales cost. 5 bits lose again
+/// * The scales take 6 bits rather than 8 (+0.23 dB at 1 bpp, +0.17 at 0.5, and +0.24
+///   at effort 1): the stored colours are solved for the stored geometry, which absorbs most of what coarser scales cost. 5 bits lose again
 ///   (−0.27 dB at 1 bpp against 6). `alpha` mode was not measured again and keeps 8.
-/// * The angle, kept within a quarter turn since session 11, takes 7 bits: twice the
+/// * The angle, kept within a quarter turn, takes 7 bits: twice the
 ///   precision the 8 bits over a free angle's range had, in as many bits. Of 6, 7 and 8
 ///   bits on the same images at 1 bpp, 7 and 8 were within 0.03 dB of each other and 6
-///   lost 0.1 dB (session 11); with 6-bit scales, a 6-bit angle loses 0.12 dB (session 14).
+///   lost 0.1 dB; with 6-bit scales, a 6-bit angle loses 0.12 dB.
 pub fn default_bits(width: u32, height: u32, blend: Blend) -> BitDepths {
     let side = width.max(height).max(2);
     let position = (32 - (side - 1).leading_zeros() + 2).clamp(6, 20) as u8;
@@ -852,8 +855,8 @@ impl Runner<'_, '_> {
     /// resolution.
     ///
     /// The count chosen before the fit prices the initial Gaussians, which code a few per
-    /// cent dearer than fitted ones, so files came out 6 % under a 1 bpp budget (Kodak,
-    /// session 11). Measured again at each densification, the count follows the cost.
+    /// cent dearer than fitted ones, so files came out 6 % under a 1 bpp budget (Kodak).
+    /// Measured again at each densification, the count follows the cost.
     fn filling(&self, fitter: &Fitter) -> Option<usize> {
         let b = self.fill?;
         let t = fitter.target;
@@ -1070,8 +1073,8 @@ pub fn encode(
             // correction), which undid much of the coarse fit (the scale table's 12 MP
             // image: 50.0 dB at the first full-resolution step, 29.1 dB ten steps later);
             // with the state kept, 160 steps half coarse gained 0.6 dB on the validation
-            // images, and a colour solve here gained nothing more (BENCHMARKS.md,
-            // session 12).
+            // images, and a colour solve here gained nothing more (BENCHMARKS.md, the
+            // coarse fit handed on whole).
             full.adam = adam;
             full.fallback = fallback;
             if full.fallback.is_none() {
@@ -1164,7 +1167,7 @@ fn finish(
         // codes keep changing; once the geometry is fixed, the colours that best render it
         // are one linear solve away: +0.35 dB at the default level on the validation
         // images (+0.32 dB with half the iterations), +0.13 dB at effort 1, for 2-8 % more
-        // time (BENCHMARKS.md, session 13).
+        // time (BENCHMARKS.md, the stored colours solved for the stored geometry).
         // Only the colours are quantized again; the geometry's codes stay as they are.
         let mut stored = records.to_scene();
         stored.gaussians.colors = std::mem::take(&mut scene.gaussians.colors);

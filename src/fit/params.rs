@@ -79,7 +79,7 @@ pub fn chain(
 /// `[−π/4, π/4]` quantizes them over a quarter of the range a free angle spreads over
 /// (2π or more after a fit): the same step takes a code two bits narrower, and about one
 /// bit fewer once range-coded, as fitted angles are not spread evenly (LOL eval15 at
-/// 1 bpp, BENCHMARKS.md session 11). The interval is
+/// 1 bpp, BENCHMARKS.md, angles within a quarter turn). The interval is
 /// centred on 0 because fitted angles crowd about the axes: an interval with an end at an
 /// axis would split that crowd over both ends. Non-finite angles are left alone.
 pub fn canonical_rotation(p: [f32; 3]) -> ([f32; 3], bool) {

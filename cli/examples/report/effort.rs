@@ -187,7 +187,7 @@ fn is_before(c: &Config) -> bool {
 }
 
 /// The learning rates of the fit before effort levels (GaussianImage's), which the
-/// levels' rates replaced in session 10.
+/// levels' rates replaced.
 const BEFORE_RATES: LearningRates = LearningRates {
     position: 2e-4,
     log_scale: 0.01,
@@ -211,8 +211,8 @@ fn markdown(
          Machine: {}. Commit: `{}`. The {} Kodak images at 1 bpp, on the CPU (`--device cpu`),\n\
          one encode at a time; for each image every configuration of a run in turn. PSNR of the stored\n\
          file; Δ is the mean of each image's difference to the fit before effort levels\n\
-         (400 full-resolution steps at GaussianImage's learning rates, the default before session 10;\n\
-         its colours stored as its last step left them, without the final solve of session 13).\n\
+         (400 full-resolution steps at GaussianImage's learning rates, the default before the levels;\n\
+         its colours stored as its last step left them, without the final colour solve).\n\
          Regenerate: `cargo run --release --example report -- --effort-only`.\n\n\
          | configuration | steps (coarse share) | colour solve | median time | mean PSNR | Δ PSNR | median N |\n\
          |---|---|---|---|---|---|---|\n",
