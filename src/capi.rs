@@ -32,6 +32,8 @@ fn status_of(kind: ErrorKind) -> GsiStatus {
         ErrorKind::InvalidValue => 11,
         ErrorKind::LimitExceeded => 12,
         ErrorKind::Decompression => 13,
+        // A kind newer than this header (`ErrorKind` is non-exhaustive).
+        _ => GSI_ERR_INTERNAL,
     }
 }
 

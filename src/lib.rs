@@ -85,35 +85,30 @@
 //! From C, the same decoder is `include/gsi.h` (feature `capi`, in the staticlib and
 //! cdylib); `examples/c/decode.c` shows its use.
 
-// The layers, lowest first (README "Layers"; `tools/check-layers.py` keeps them one-way):
-// contract -> model -> format -> render -> decode, gpu -> {optim, metrics} -> fit, enhance
-// -> capi, image_support, info. The command-line tool (`cli/`) is an application on top.
-// (rustfmt sorts the declarations below; the order above is the one that matters.)
-pub mod contract;
-mod decode;
+// The layers are crates (README "Architecture"), lowest first: gsi-format (contract,
+// model, format) -> gsi-render (render, decode) -> gsi-gpu (device, gpu) -> gsi-optim,
+// gsi-metrics -> gsi-fit, gsi-enhance -> this facade (capi, image_support, info, synth).
+// Cargo holds the arrows; the modules keep the paths they had in one crate.
+pub use gsi_format::{contract, format, model};
 #[cfg(feature = "encode")]
-pub mod device;
-pub mod format;
+pub use gsi_gpu::device;
 #[cfg(feature = "gpu")]
-pub mod gpu;
+pub use gsi_gpu::gpu;
+pub use gsi_render::render;
 #[cfg(feature = "image")]
 pub mod image_support;
 #[cfg(feature = "info")]
 pub mod info;
-pub mod model;
-pub mod render;
 
 // Stage 2: applying and reverting a stored enhancer is in every build, fitting one is
 // feature `encode`.
-pub mod enhance;
+pub use gsi_enhance::enhance;
 #[cfg(feature = "encode")]
-pub mod fit;
+pub use gsi_fit::fit;
 #[cfg(feature = "encode")]
-pub mod metrics;
+pub use gsi_metrics::metrics;
 #[cfg(feature = "encode")]
-pub mod optim;
-#[cfg(feature = "encode")]
-pub(crate) mod rng;
+pub use gsi_optim::optim;
 
 /// Deterministic test data (random scenes, the corpus); for tests, benches and tools, never
 /// used by the library itself.
@@ -124,9 +119,9 @@ pub mod synth;
 #[cfg(feature = "capi")]
 pub mod capi;
 
-pub use decode::{decode, scaled_size, Image, PixelFormat, Reader};
 #[cfg(feature = "encode")]
 pub use device::Device;
 pub use format::{Error, ErrorKind, Header, Limits, Result};
+pub use gsi_render::decode::{decode, scaled_size, Image, PixelFormat, Reader};
 pub use model::{Blend, CovParam, GaussianSet, Scene};
 pub use render::{render, RgbImage};

@@ -1,53 +1,37 @@
 #!/usr/bin/env python3
-"""Fail on any import cycle between the library's top-level modules.
+"""Fail on what Cargo cannot see about the layers: a cycle between the files of a crate,
+and a library's use of the test-data generator.
 
-The library is built in one-way layers (README, "Layers"): each top-level module of
-`src/` may use the modules below it and never one above it. This script reads every
-`crate::NAME` path in non-test code under `src/` (the `gsi` binary, which lives in
-`cli/`, is an application on top and is not scanned), builds the graph of top-level
-modules, and exits 1 with the cycle if there is one. It also refuses any library use of
-`synth`, the test-data generator, which only tests, benches and tools may use.
+The layers are crates (README, "Architecture"), and Cargo refuses a cycle between crates.
+Inside a crate it allows any: this script reads every `crate::` and `super::` path in
+non-test code, builds the graph of the crate's modules one level below its home (the
+files of `enhance/` in gsi-enhance, the top-level modules of a crate that has several),
+and exits 1 with the cycle if there is one. It also refuses any use of the test-data
+generator (`gsi_synth`, the facade's `synth`) outside tests, the facade's `synth` module
+that re-exports it, and the tools.
 
-Test code (items under `#[cfg(test)]`) may use anything, as tests sit above every
-layer; those items are skipped. Comments are skipped too (doc links are not imports).
+Test code (items under `#[cfg(test)]`, files declared `#[cfg(test)] mod NAME;`) may use
+anything; comments are skipped (doc links are not imports).
 
-Usage: tools/check-layers.py   (prints the layers, lowest first)
+Usage: tools/check-layers.py   (prints each crate's modules, lowest first)
 """
 import os
 import re
 import sys
 
-ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "src")
-PATH = re.compile(r"\$?crate::(\{[^}]*\}|[A-Za-z_][A-Za-z0-9_]*)")
+REPO = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
+PATH = re.compile(r"(?<![\w$])(\$?crate|super)::(\{[^}]*\}|[A-Za-z_][A-Za-z0-9_]*(?:::[A-Za-z_][A-Za-z0-9_]*)*)")
 
 
-def reexports(root):
-    """Names the crate root re-exports (`pub use module::{A, b}`), by the module they
-    come from, so that `crate::Reader` counts as a use of `decode`."""
-    with open(os.path.join(root, "lib.rs"), encoding="utf-8") as f:
-        text = f.read()
-    names = {}
-    for module, group in re.findall(r"pub use (\w+)::\{([^}]*)\}", text):
-        for name in re.findall(r"\w+", group):
-            names[name] = module
-    for module, name in re.findall(r"pub use (\w+)::(\w+);", text):
-        names[name] = module
-    return names
-
-
-def targets(line, names):
-    """The top-level modules a line's `crate::` paths name."""
-    for path in PATH.findall(line):
-        heads = re.findall(r"(?:^|[{,])\s*(\w+)", path) if path.startswith("{") else [path]
-        for head in heads:
-            yield names.get(head, head)
-
-
-def module_of(rel):
-    parts = rel[:-3].split(os.sep)
-    if parts[-1] == "mod":
-        parts = parts[:-1]
-    return parts[0] if parts and parts[0] != "lib" else None
+def crates():
+    """`(name, src folder)` of every library crate of the workspace."""
+    out = [("gsi", os.path.join(REPO, "src"))]
+    base = os.path.join(REPO, "crates")
+    for name in sorted(os.listdir(base)):
+        src = os.path.join(base, name, "src")
+        if os.path.isdir(src):
+            out.append(("gsi-" + name, src))
+    return out
 
 
 def code_lines(text):
@@ -56,9 +40,7 @@ def code_lines(text):
     i = 0
     while i < len(lines):
         stripped = lines[i].strip()
-        if stripped.startswith("#[cfg(test)]"):
-            # Skip the attribute and the item it gates: a one-line item, or the
-            # lines up to its matching closing brace.
+        if stripped.startswith("#[cfg(test)]") or stripped.startswith("#[cfg(all(test"):
             i += 1
             depth, opened = 0, False
             while i < len(lines):
@@ -88,30 +70,76 @@ def test_files(root):
     return skip
 
 
-def graph(root=ROOT):
-    edges = {}
+def module_path(rel):
+    """`enhance/tone.rs` -> ["enhance", "tone"]; `enhance/mod.rs` -> ["enhance"]."""
+    parts = rel[:-3].split(os.sep)
+    if parts[-1] in ("mod", "lib"):
+        parts = parts[:-1]
+    return parts
+
+
+def homes(root):
+    """The crate's top-level modules (`mod`/`pub mod` in lib.rs)."""
+    with open(os.path.join(root, "lib.rs"), encoding="utf-8") as f:
+        return re.findall(r"^\s*(?:#\[[^\]]*\]\s*)*(?:pub(?:\([a-z]+\))?\s+)?mod\s+(\w+)", f.read(), re.M)
+
+
+def graph(root):
+    """Edges between sibling modules, by the folder that holds them (`()` for the crate's
+    top-level modules, `("enhance",)` for the files of `enhance/`, and so on down): a
+    path from a file under `a` to a module under its sibling `b` is an edge `a -> b` of
+    their folder. Also the files that use the test data."""
     skip = test_files(root)
-    names = reexports(root)
+    edges, synth = {}, []
     for dirpath, _, files in os.walk(root):
         for name in files:
-            if not name.endswith(".rs"):
-                continue
             full = os.path.join(dirpath, name)
-            if full in skip:
+            if not name.endswith(".rs") or full in skip:
                 continue
             rel = os.path.relpath(full, root)
-            if rel.startswith("bin" + os.sep):
-                continue
-            src = module_of(rel)
-            if src is None:
-                continue
+            here = module_path(rel)
+            for depth in range(len(here)):
+                edges.setdefault(tuple(here[:depth]), {}).setdefault(here[depth], {})
             with open(full, encoding="utf-8") as f:
-                for line in code_lines(f.read()):
-                    for dst in targets(line, names):
-                        if dst != src and dst != "self":
-                            edges.setdefault(src, {}).setdefault(dst, set()).add(rel)
-            edges.setdefault(src, {})
-    return edges
+                text = f.read()
+            for line in code_lines(text):
+                if "gsi_synth" in line or re.search(r"crate::synth\b", line):
+                    synth.append(rel)
+                for kind, path in PATH.findall(line):
+                    groups = (re.findall(r"(?:^|[{,])\s*([\w:]+)", path[1:-1])
+                              if path.startswith("{") else [path])
+                    for g in groups:
+                        segs = [x for x in g.split("::") if x]
+                        # `super::x` in a/b.rs and in a/b/mod.rs both name a::x.
+                        target = (here[:-1] + segs) if kind == "super" else segs
+                        n = 0
+                        while n < min(len(here), len(target)) and here[n] == target[n]:
+                            n += 1
+                        if n < len(here) and n < len(target):
+                            folder, a, b = tuple(here[:n]), here[n], target[n]
+                            if b in names_of(root, list(folder)):
+                                edges.setdefault(folder, {}).setdefault(a, {}).setdefault(
+                                    b, set()).add(rel)
+    return edges, sorted(set(synth))
+
+
+_NAMES = {}
+
+
+def names_of(root, prefix):
+    """The module names that exist at `prefix` (files or folders)."""
+    key = (root, tuple(prefix))
+    if key not in _NAMES:
+        folder = os.path.join(root, *prefix)
+        names = set()
+        if os.path.isdir(folder):
+            for n in os.listdir(folder):
+                if n.endswith(".rs") and n not in ("mod.rs", "lib.rs"):
+                    names.add(n[:-3])
+                elif os.path.isdir(os.path.join(folder, n)):
+                    names.add(n)
+        _NAMES[key] = names
+    return _NAMES[key]
 
 
 def find_cycle(edges):
@@ -143,7 +171,7 @@ def layers(edges):
     """Modules grouped by height: a module's layer is one above its highest import."""
     height = {}
 
-    def h(n):
+    def h(n, seen=()):
         if n not in height:
             height[n] = 1 + max((h(m) for m in edges.get(n, {}) if m in edges), default=-1)
         return height[n]
@@ -156,52 +184,29 @@ def layers(edges):
     return [sorted(out[k]) for k in sorted(out)]
 
 
-def self_test():
-    """The checker must see a cycle through a `use` group, a root re-export and a macro
-    path, and must not see one through test code or comments."""
-    import tempfile
-
-    files = {
-        "lib.rs": "pub mod a;\npub mod b;\npub mod c;\npub use c::Thing;\n",
-        "a.rs": "use crate::{b::x, model};\n",
-        "b.rs": "// crate::c in a comment\n#[cfg(test)]\nmod tests {\n    use crate::c::y;\n}\n"
-        "fn f() { $crate::c::z(); }\n",
-        "c.rs": "use crate::Thing;\nfn g() -> crate::a::T {}\n",
-    }
-    with tempfile.TemporaryDirectory() as root:
-        for name, text in files.items():
-            with open(os.path.join(root, name), "w", encoding="utf-8") as f:
-                f.write(text)
-        cycle = find_cycle(graph(root))
-        assert cycle and set(cycle) == {"a", "b", "c"}, cycle
-        with open(os.path.join(root, "b.rs"), "w", encoding="utf-8") as f:
-            f.write(files["b.rs"].replace("$crate::c::z()", "z()"))
-        assert find_cycle(graph(root)) is None
-
-
 def main():
-    self_test()
-    edges = graph()
     failed = False
-    cycle = find_cycle(edges)
-    if cycle:
-        failed = True
-        print("import cycle between modules: " + " -> ".join(cycle))
-        for a, b in zip(cycle, cycle[1:]):
-            print(f"  {a} -> {b}: {', '.join(sorted(edges[a][b]))}")
-    users = sorted(m for m in edges if "synth" in edges[m])
-    if users:
-        failed = True
-        for m in users:
-            print(f"library module {m} uses synth (test data only): "
-                  + ", ".join(sorted(edges[m]["synth"])))
+    for name, root in crates():
+        by_folder, synth = graph(root)
+        for folder, edges in sorted(by_folder.items()):
+            cycle = find_cycle(edges)
+            if cycle:
+                failed = True
+                where = "::".join(folder) or "the crate root"
+                print(f"{name}: import cycle between the modules of {where}: "
+                      + " -> ".join(cycle))
+                for a, b in zip(cycle, cycle[1:]):
+                    print(f"  {a} -> {b}: {', '.join(sorted(edges[a][b]))}")
+        allowed = {"synth.rs"} if name == "gsi" else set()
+        users = [f for f in synth if f not in allowed]
+        if users:
+            failed = True
+            print(f"{name}: library code uses the test data (gsi_synth): {', '.join(users)}")
+        top = by_folder.get((), {})
+        print(f"{name}: " + " < ".join(", ".join(l) for l in layers(top)))
     if failed:
         return 1
-    if True:
-        for k, mods in enumerate(layers(edges)):
-            deps = sorted({d for m in mods for d in edges[m]})
-            print(f"layer {k}: {', '.join(mods)}" + (f"  (uses {', '.join(deps)})" if deps else ""))
-        print("no import cycle between the library's modules")
+    print("no import cycle inside any crate; no library use of the test data")
     return 0
 
 

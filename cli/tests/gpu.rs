@@ -286,7 +286,7 @@ fn gradients_match(blend: Blend, w: u32, h: u32) {
         .map(|&x| 2.0 * (x - rng.unit()) / n)
         .collect();
     let cpu = backward(&fwd, &proj, &dl, Need::All);
-    let gpu_grads = gpu.backward(&proj, blend, w, h, &dl).unwrap();
+    let gpu_grads = gsi::fit::backward_gpu::backward(&gpu, &proj, blend, w, h, &dl).unwrap();
     assert_eq!(cpu.len(), gpu_grads.len());
     let kinds: [(&str, std::ops::Range<usize>); 4] = [
         ("mean", 0..2),

@@ -3,10 +3,8 @@
 //! enhanced in the container with the defaults and with each default turned off,
 //! decoded and scored; contact sheets in `DIR/enhance/`.
 
-use crate::{
-    auto_gamma_exponent, commit, gamma_curve, images, load, lowlight, machine, mean, median,
-    replace_section, README_ROWS,
-};
+use crate::metrics_table::{auto_gamma_exponent, gamma_curve, README_ROWS};
+use crate::{commit, images, load, lowlight, machine, mean, median, replace_section};
 use gsi::enhance::curve::CurveOptions;
 use gsi::enhance::exposure::Exposure;
 use gsi::enhance::fit::EnhanceOptions;

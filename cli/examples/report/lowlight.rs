@@ -2,6 +2,7 @@
 //! and the `lowlight_set` example: see that example for what it is and how it was matched
 //! to LOL.
 
+use gsi::metrics::BT601;
 use gsi::metrics::{linear_to_srgb, srgb_to_linear};
 use std::path::{Path, PathBuf};
 
@@ -17,7 +18,7 @@ const LUMA_RANGE: (f64, f64) = (0.025, 0.097);
 const SIGMA: [f64; 3] = [1.93, 1.19, 1.55];
 
 fn luma(p: &[u8]) -> f64 {
-    (0.299 * f64::from(p[0]) + 0.587 * f64::from(p[1]) + 0.114 * f64::from(p[2])) / 255.0
+    (BT601[0] * f64::from(p[0]) + BT601[1] * f64::from(p[1]) + BT601[2] * f64::from(p[2])) / 255.0
 }
 
 fn mean_luma(rgb: &[u8]) -> f64 {
@@ -174,7 +175,7 @@ pub fn make(src: &Path, out: &Path) {
             let d = darken(&rgb, g);
             let m = d
                 .chunks_exact(3)
-                .map(|p| 0.299 * p[0] + 0.587 * p[1] + 0.114 * p[2])
+                .map(|p| BT601[0] * p[0] + BT601[1] * p[1] + BT601[2] * p[2])
                 .sum::<f64>()
                 / 255.0
                 / (d.len() / 3) as f64;
@@ -243,7 +244,7 @@ fn stats(lin: &[f64]) -> (f64, f64, f64) {
 fn gained_luma(rgb: &[u8], g: f64) -> f64 {
     let d = darken(rgb, g);
     d.chunks_exact(3)
-        .map(|p| 0.299 * p[0] + 0.587 * p[1] + 0.114 * p[2])
+        .map(|p| BT601[0] * p[0] + BT601[1] * p[1] + BT601[2] * p[2])
         .sum::<f64>()
         / 255.0
         / (d.len() / 3) as f64

@@ -1,0 +1,90 @@
+//! The decoder section of BENCHMARKS.md (`report:decode`): parse and CPU render of random
+//! scenes at 768×512, timed here.
+
+use super::median;
+use std::time::Instant;
+
+/// Median wall time of `f` over `runs` runs, after one warm-up, in milliseconds.
+fn median_ms(runs: usize, mut f: impl FnMut()) -> f64 {
+    f();
+    median(
+        (0..runs)
+            .map(|_| {
+                let t = Instant::now();
+                f();
+                t.elapsed().as_secs_f64() * 1e3
+            })
+            .collect(),
+    )
+}
+
+/// Parse and CPU render of random scenes at 768×512, timed here so that this command
+/// regenerates the figures (criterion's `cargo bench --bench decode` measures the same).
+pub fn section(stamp: &(String, String)) -> String {
+    use gsi::format::{BitDepths, Limits, Records, WriteOptions};
+    use gsi::model::Blend;
+    use gsi::synth::{random_scene, SceneSpec};
+    use std::fmt::Write;
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "## Decoder: parse and CPU render\n\nMachine: {}. Commit: `{}`. Release build, `parallel` feature (rayon on all cores). \
+         Random scenes (`gsi::synth::random_scene`) at 768×512, σ log-uniform in 0.5–8 px (about the footprint of fitted sets), \
+         default bit depths; median of 21 runs after a warm-up. Regenerate with `cargo run --release --example report -- --quick`; \
+         `cargo bench --bench decode` measures the same with criterion.\n",
+        stamp.0, stamp.1
+    );
+    let _ = writeln!(
+        s,
+        "| benchmark | 10k Gaussians | 100k Gaussians |\n|---|---|---|"
+    );
+    let scenes =
+        |blend| [10_000usize, 100_000].map(|n| random_scene(1, SceneSpec::new(768, 512, n, blend)));
+    let parse: Vec<f64> = scenes(Blend::Sum)
+        .iter()
+        .map(|scene| {
+            let bytes = gsi::format::to_bytes(
+                &Records::from_scene(scene, BitDepths::default()),
+                &WriteOptions::default(),
+            )
+            .unwrap();
+            median_ms(21, || {
+                std::hint::black_box(
+                    gsi::format::read_file(&bytes[..], Limits::default())
+                        .unwrap()
+                        .records
+                        .to_scene(),
+                );
+            })
+        })
+        .collect();
+    let _ = writeln!(
+        s,
+        "| parse + dequantize | {:.2} ms | {:.2} ms |",
+        parse[0], parse[1]
+    );
+    for blend in [Blend::Sum, Blend::Alpha] {
+        let t: Vec<f64> = scenes(blend)
+            .iter()
+            .map(|scene| {
+                median_ms(21, || {
+                    drop(std::hint::black_box(
+                        gsi::render::render(scene, 768, 512).unwrap(),
+                    ))
+                })
+            })
+            .collect();
+        let _ = writeln!(
+            s,
+            "| render CPU, `{}`, 768×512 | {:.2} ms | {:.1} ms |",
+            blend.name(),
+            t[0],
+            t[1]
+        );
+    }
+    let _ = writeln!(
+        s,
+        "\nTarget of issue 2: 10k Gaussians at 768×512, `sum`, ≤ 25 ms on the 2-core machine.\n"
+    );
+    s
+}

@@ -1,0 +1,136 @@
+//! Whether an image needs stage 2: the low-light decision of its front door.
+//!
+//! A global meter reads a lamp, a window or a lit sky as "well exposed" and leaves the
+//! dark rest of the photograph alone. The decision is local instead: an image is
+//! enhanced when a meaningful part of it is under-exposed, judged from the illumination
+//! of [`super::light`] (the brightest channel, smoothed over 1/32 of the image).
+//!
+//! A region is under-exposed where its illumination is below [`DARK_LEVEL`]: 0.2 on
+//! the display scale is a linear 0.033, about 2.4 stops below middle grey, where a
+//! well-exposed photograph keeps its deep shadows only. An image is low-light when
+//! [`DARK_SHARE`], a quarter of it, is. On the validation sets this enhances every LOL
+//! pair and every dark photograph of `mef13` (34–78 % under-exposed) and leaves its
+//! daylight scenes, lit interiors and sunsets (0–15 %) as they are.
+
+use super::light::illumination;
+use super::operator::ColorOperator;
+use super::working::work_size;
+use gsi_format::model::Scene;
+use std::fmt;
+
+/// Illumination below which a region counts as under-exposed.
+pub const DARK_LEVEL: f32 = 0.2;
+/// Share of the image that must be under-exposed for it to be enhanced.
+pub const DARK_SHARE: f32 = 0.25;
+
+/// What [`assess`] found.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Assessment {
+    /// Share of the image whose illumination is below [`DARK_LEVEL`], in `[0, 1]`.
+    pub dark_share: f32,
+    /// Mean display luma of the image as it is.
+    pub mean_luma: f32,
+}
+
+impl Assessment {
+    /// Whether stage 2 should enhance the image: [`DARK_SHARE`] of it or more is
+    /// under-exposed.
+    pub fn is_low_light(&self) -> bool {
+        self.dark_share >= DARK_SHARE
+    }
+}
+
+impl fmt::Display for Assessment {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "{:.0}% of the image is under-exposed (lit below {DARK_LEVEL} on a 0-1 scale; \
+             {:.0}% makes it low-light), mean luma {:.3}",
+            100.0 * self.dark_share,
+            100.0 * DARK_SHARE,
+            self.mean_luma
+        )
+    }
+}
+
+/// Assess `scene` as shown, rendered at the working size of stage 2 (long side
+/// `work_side`).
+pub fn assess(scene: &Scene, work_side: u32) -> Assessment {
+    let (w, h) = work_size(scene.width, scene.height, work_side);
+    let op = ColorOperator::new(scene, w, h);
+    let mut img = vec![0.0f32; (w * h * 3) as usize];
+    op.render(&scene.gaussians.colors, &mut img);
+    if let Some(t) = &scene.tone {
+        t.apply(&mut img);
+    }
+    assess_image(&img, w as usize, h as usize)
+}
+
+/// [`assess`] of an image of `width × height` interleaved RGB display values.
+pub fn assess_image(rgb: &[f32], width: usize, height: usize) -> Assessment {
+    let light = illumination(rgb, width, height);
+    let n = light.len().max(1) as f32;
+    let dark = light.iter().filter(|&&l| l < DARK_LEVEL).count() as f32;
+    Assessment {
+        dark_share: dark / n,
+        mean_luma: super::fit::mean_luma(rgb),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn flat(v: f32, w: usize, h: usize) -> Vec<f32> {
+        vec![v; w * h * 3]
+    }
+
+    #[test]
+    fn a_dark_image_is_low_light_and_a_bright_one_is_not() {
+        assert!(assess_image(&flat(0.05, 64, 48), 64, 48).is_low_light());
+        let a = assess_image(&flat(0.6, 64, 48), 64, 48);
+        assert!(!a.is_low_light() && a.dark_share == 0.0, "{a:?}");
+    }
+
+    #[test]
+    fn a_lamp_does_not_hide_a_dark_room() {
+        // A dark room (0.03) with a lamp filling a tenth of the frame at full brightness:
+        // its mean is that of a well-exposed photograph's shadows, but most of it is dark.
+        let (w, h) = (80, 60);
+        let mut img = flat(0.03, w, h);
+        for y in 0..h {
+            for x in 0..8 {
+                img[(y * w + x) * 3..][..3].copy_from_slice(&[1.0, 0.95, 0.8]);
+            }
+        }
+        let a = assess_image(&img, w, h);
+        assert!(a.is_low_light() && a.dark_share > 0.7, "{a:?}");
+    }
+
+    #[test]
+    fn a_bright_scene_with_a_dark_corner_is_left_alone() {
+        let (w, h) = (80, 60);
+        let mut img = flat(0.5, w, h);
+        for y in 0..20 {
+            for x in 0..20 {
+                img[(y * w + x) * 3..][..3].copy_from_slice(&[0.02; 3]);
+            }
+        }
+        let a = assess_image(&img, w, h);
+        assert!(!a.is_low_light() && a.dark_share < 0.1, "{a:?}");
+        assert!(a.to_string().contains("under-exposed"), "{a}");
+    }
+
+    #[test]
+    fn black_white_and_tiny_images_are_assessed() {
+        for (img, w, h, low) in [
+            (flat(0.0, 1, 1), 1, 1, true),
+            (flat(1.0, 3, 2), 3, 2, false),
+            (vec![f32::NAN; 12], 2, 2, true),
+        ] {
+            let a = assess_image(&img, w, h);
+            assert_eq!(a.is_low_light(), low, "{a:?}");
+            assert!(a.dark_share.is_finite() && a.mean_luma.is_finite());
+        }
+    }
+}

@@ -1,0 +1,379 @@
+//! Records: the attributes exactly as stored (integer codes plus quantizers), and their
+//! lossless link to the float [`Scene`](crate::model::Scene).
+
+use super::context;
+use super::error::{invalid, Error, ErrorKind, Result};
+use super::header::Header;
+use super::limits::{AllocBudget, Limits};
+use super::quant::{self, Quantizer};
+use crate::model::{CovParam, GaussianSet, Scene};
+use byteorder::{BigEndian, ByteOrder};
+
+/// Payload compression method of an attribute chunk.
+pub const METHOD_STORED: u8 = 0;
+pub const METHOD_ZSTD: u8 = 1;
+/// Predicted, context-modelled and range-coded (spec §5.4; version 1.1).
+pub const METHOD_CODED: u8 = 2;
+
+/// Bytes in front of the packed data for an attribute of `components` components.
+pub const fn attribute_preamble_len(components: usize) -> usize {
+    1 + 9 * components + 1 + 4
+}
+
+/// One attribute (positions, covariance, colour or opacity) of every Gaussian, as codes.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Attribute {
+    /// One quantizer per component.
+    pub quantizers: Vec<Quantizer>,
+    /// Planar codes: component 0 of every Gaussian, then component 1, …
+    pub codes: Vec<u32>,
+}
+
+impl Attribute {
+    pub fn components(&self) -> usize {
+        self.quantizers.len()
+    }
+
+    pub fn count(&self) -> usize {
+        self.codes.len().checked_div(self.components()).unwrap_or(0)
+    }
+
+    /// Quantize `count` records of `C` components with the given quantizers.
+    pub fn quantize<const C: usize>(values: &[[f32; C]], quantizers: [Quantizer; C]) -> Attribute {
+        let mut codes = Vec::with_capacity(values.len() * C);
+        for (c, q) in quantizers.iter().enumerate() {
+            codes.extend(values.iter().map(|v| q.quantize(v[c])));
+        }
+        Attribute {
+            quantizers: quantizers.to_vec(),
+            codes,
+        }
+    }
+
+    /// Quantize with `bits[c]`-bit quantizers fitted to each component's range.
+    pub fn fit<const C: usize>(values: &[[f32; C]], bits: [u8; C]) -> Attribute {
+        let qs = std::array::from_fn(|c| Quantizer::fit(bits[c], values.iter().map(|v| v[c])));
+        Attribute::quantize(values, qs)
+    }
+
+    /// Dequantize into records of `C` components (`C` must equal `components()`).
+    pub fn values<const C: usize>(&self) -> Vec<[f32; C]> {
+        assert_eq!(
+            C,
+            self.components(),
+            "attribute has {} components",
+            self.components()
+        );
+        let n = self.count();
+        let mut out = vec![[0f32; C]; n];
+        for (c, q) in self.quantizers.iter().enumerate() {
+            for (o, &code) in out.iter_mut().zip(&self.codes[c * n..(c + 1) * n]) {
+                o[c] = q.dequantize(code);
+            }
+        }
+        out
+    }
+
+    /// Serialize as an attribute chunk payload (spec §5.1), choosing whichever of stored
+    /// and zstd at `level` is smaller: a payload every 1.0 decoder reads.
+    pub fn to_payload(&self, zstd_level: i32) -> Result<Vec<u8>> {
+        self.to_payload_with(zstd_level, false)
+    }
+
+    /// A method-2 payload in the given modes, for the spec's worked example and tests;
+    /// `None` where the modes are not valid for this attribute.
+    #[doc(hidden)]
+    pub fn to_coded_payload(&self, modes: &[u8]) -> Option<Vec<u8>> {
+        let ok = modes.len() == self.components() && context::check_modes(modes).is_ok();
+        ok.then(|| {
+            let data =
+                context::encode_with_modes(&self.codes, self.count(), &self.quantizers, modes);
+            self.payload(METHOD_CODED, &data)
+        })
+    }
+
+    /// [`to_payload`](Self::to_payload), and with `coded` also method 2 (§5.4), of the
+    /// three whichever is smallest.
+    pub fn to_payload_with(&self, zstd_level: i32, coded: bool) -> Result<Vec<u8>> {
+        let packed = quant::pack(&self.codes, self.count(), &self.quantizers);
+        let zipped = zstd::bulk::compress(&packed, zstd_level)?;
+        let (mut method, mut data) = if zipped.len() < packed.len() {
+            (METHOD_ZSTD, zipped)
+        } else {
+            (METHOD_STORED, packed)
+        };
+        if coded {
+            let c = context::encode(&self.codes, self.count(), &self.quantizers);
+            if c.len() < data.len() {
+                (method, data) = (METHOD_CODED, c);
+            }
+        }
+        Ok(self.payload(method, &data))
+    }
+
+    /// The preamble (§5.1) and `data`.
+    fn payload(&self, method: u8, data: &[u8]) -> Vec<u8> {
+        let packed_len = quant::packed_len(self.count() as u64, &self.quantizers);
+        let mut out = Vec::with_capacity(attribute_preamble_len(self.components()) + data.len());
+        out.push(self.components() as u8);
+        for q in &self.quantizers {
+            out.push(q.bits);
+            out.extend(q.min.to_be_bytes());
+            out.extend(q.max.to_be_bytes());
+        }
+        out.push(method);
+        out.extend((packed_len as u32).to_be_bytes());
+        out.extend_from_slice(data);
+        out
+    }
+
+    /// Parse one attribute payload of `count` records (default [`Limits`]): the entry of
+    /// the spec's worked examples and of the fuzz target of method 2.
+    #[doc(hidden)]
+    pub fn from_payload(payload: &[u8], components: usize, count: u32) -> Result<Attribute> {
+        Self::parse_standalone(payload, components, count, &Limits::default())
+    }
+
+    /// [`parse`](Self::parse) with its own allocation budget, for a payload found outside
+    /// the normal chunk sequence (inside `gORC`).
+    pub fn parse_standalone(
+        p: &[u8],
+        components: usize,
+        count: u32,
+        limits: &Limits,
+    ) -> Result<Attribute> {
+        Self::parse(p, components, count, limits, &mut AllocBudget::new(limits))
+    }
+
+    /// Parse an attribute chunk payload holding `count` records of `components` components.
+    /// Sizes are checked against `limits` and `budget` before anything is allocated.
+    pub fn parse(
+        p: &[u8],
+        components: usize,
+        count: u32,
+        limits: &Limits,
+        budget: &mut AllocBudget,
+    ) -> Result<Attribute> {
+        let pre = attribute_preamble_len(components);
+        if p.len() < pre {
+            return Err(Error::new(
+                ErrorKind::BadChunkLength,
+                format!("{} bytes, shorter than its {pre}-byte preamble", p.len()),
+            ));
+        }
+        if usize::from(p[0]) != components {
+            return Err(invalid(format!(
+                "{} components, expected {components}",
+                p[0]
+            )));
+        }
+        let quantizers: Vec<Quantizer> = p[1..1 + 9 * components]
+            .chunks_exact(9)
+            .map(|d| Quantizer {
+                bits: d[0],
+                min: BigEndian::read_f32(&d[1..5]),
+                max: BigEndian::read_f32(&d[5..9]),
+            })
+            .collect();
+        for q in &quantizers {
+            q.validate()?;
+        }
+        let method = p[pre - 5];
+        let declared = u64::from(BigEndian::read_u32(&p[pre - 4..pre]));
+        let expected = quant::packed_len(u64::from(count), &quantizers);
+        if declared != expected {
+            return Err(invalid(format!(
+                "packed length {declared}, expected {expected} for {count} records"
+            )));
+        }
+        if expected > limits.max_decompressed {
+            return Err(Error::new(
+                ErrorKind::LimitExceeded,
+                format!(
+                    "{expected} packed bytes exceeds {}",
+                    limits.max_decompressed
+                ),
+            ));
+        }
+        let data = &p[pre..];
+        let zipped;
+        let packed: &[u8] = match method {
+            METHOD_STORED => {
+                if data.len() as u64 != expected {
+                    return Err(Error::new(
+                        ErrorKind::BadChunkLength,
+                        format!("{} stored bytes, expected {expected}", data.len()),
+                    ));
+                }
+                data
+            }
+            METHOD_ZSTD => {
+                budget.reserve(expected, "decompressed attribute")?;
+                // A frame that would grow past `expected` fails instead of allocating more.
+                zipped = zstd::bulk::decompress(data, expected as usize)
+                    .map_err(|e| Error::new(ErrorKind::Decompression, e.to_string()))?;
+                if zipped.len() as u64 != expected {
+                    return Err(Error::new(
+                        ErrorKind::Decompression,
+                        format!("{} bytes decompressed, expected {expected}", zipped.len()),
+                    ));
+                }
+                &zipped
+            }
+            METHOD_CODED => &[],
+            m => return Err(invalid(format!("compression method {m}"))),
+        };
+        let ncodes = u64::from(count) * components as u64;
+        budget.reserve(ncodes * 4, "attribute codes")?;
+        let codes = if method == METHOD_CODED {
+            context::decode(data, count as usize, &quantizers)?
+        } else {
+            quant::unpack(packed, count as usize, &quantizers)
+        };
+        if method == METHOD_ZSTD {
+            budget.release(expected);
+        }
+        Ok(Attribute { quantizers, codes })
+    }
+}
+
+/// The four attributes of a file plus its header: the whole stored image, codes and all.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Records {
+    pub header: Header,
+    pub positions: Attribute,
+    pub covariance: Attribute,
+    pub colors: Attribute,
+    /// `None`: no `GOPA` chunk, every opacity is 1.
+    pub opacity: Option<Attribute>,
+    /// The `GTRC` chunk (spec §6.6): `None`, the blended values are shown as they are.
+    pub tone: Option<crate::model::ToneCurve>,
+}
+
+/// Bits per component an encoder spends on each attribute.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BitDepths {
+    pub position: u8,
+    /// The covariance's components; under `log-scale-rotation`, its two log-scales.
+    pub covariance: u8,
+    /// The angle of a `log-scale-rotation` covariance (its third component). Apart
+    /// because its range is the encoder's choice: the stage-1 encoder keeps every angle
+    /// within a quarter turn ([`gsi_fit::fit::params::canonical_rotation`]), where one bit
+    /// fewer than the scales already halves the step a free angle had. A `cholesky`
+    /// covariance spends `covariance` on all three components.
+    pub angle: u8,
+    pub color: u8,
+    pub opacity: u8,
+}
+
+impl BitDepths {
+    /// The depths of the three covariance components under `cov_param`: the angle of a
+    /// `log-scale-rotation` covariance takes [`BitDepths::angle`].
+    pub fn of_covariance(&self, cov_param: CovParam) -> [u8; 3] {
+        let third = match cov_param {
+            CovParam::LogScaleRotation => self.angle,
+            CovParam::Cholesky => self.covariance,
+        };
+        [self.covariance, self.covariance, third]
+    }
+}
+
+impl Default for BitDepths {
+    fn default() -> Self {
+        BitDepths {
+            position: 16,
+            covariance: 12,
+            angle: 12,
+            color: 8,
+            opacity: 8,
+        }
+    }
+}
+
+impl Records {
+    /// Quantize a scene with quantizers fitted to each component's range. Opacity is
+    /// dropped when every value is 1, since its absence means exactly that.
+    pub fn from_scene(scene: &Scene, bits: BitDepths) -> Records {
+        let g = &scene.gaussians;
+        assert!(g.is_consistent(), "inconsistent Gaussian set");
+        let opacity = g
+            .opacity
+            .as_ref()
+            .filter(|o| o.iter().any(|&a| a != 1.0))
+            .map(|o| {
+                let o: Vec<[f32; 1]> = o.iter().map(|&a| [a]).collect();
+                Attribute::fit(&o, [bits.opacity])
+            });
+        Records {
+            header: Header::new(
+                scene.width,
+                scene.height,
+                g.len() as u32,
+                scene.blend,
+                scene.cov_param,
+            ),
+            positions: Attribute::fit(&g.positions, [bits.position; 2]),
+            covariance: Attribute::fit(&g.cov, bits.of_covariance(scene.cov_param)),
+            colors: Attribute::fit(&g.colors, [bits.color; 3]),
+            opacity,
+            tone: scene.tone.clone(),
+        }
+    }
+
+    /// Dequantize into the float model.
+    pub fn to_scene(&self) -> Scene {
+        let h = &self.header;
+        Scene {
+            width: h.width,
+            height: h.height,
+            blend: h.blend,
+            cov_param: h.cov_param,
+            gaussians: GaussianSet {
+                positions: self.positions.values(),
+                cov: self.covariance.values(),
+                colors: self.colors.values(),
+                opacity: self
+                    .opacity
+                    .as_ref()
+                    .map(|a| a.values::<1>().into_iter().map(|[o]| o).collect()),
+            },
+            tone: self.tone.clone(),
+        }
+    }
+
+    /// Reorder the Gaussians along a Morton curve over their position codes, so that
+    /// neighbours in the stream are neighbours in the image and method 2 codes each
+    /// centre as a short step (§5.4). Only for `sum` blending, where the order of the
+    /// Gaussians does not change a pixel; an `alpha` file is left as it is. Clears the
+    /// importance-ordered flag, which the new order no longer honours.
+    pub fn sort_spatially(&mut self) {
+        if self.header.blend != crate::model::Blend::Sum || !self.is_consistent() {
+            return;
+        }
+        let n = self.header.count as usize;
+        let (u, v) = self.positions.codes.split_at(n);
+        let mut order: Vec<usize> = (0..n).collect();
+        order.sort_by_key(|&i| (context::morton(u[i], v[i]), i));
+        for a in [&mut self.positions, &mut self.covariance, &mut self.colors]
+            .into_iter()
+            .chain(self.opacity.as_mut())
+        {
+            a.codes = a
+                .codes
+                .chunks(n.max(1))
+                .flat_map(|plane| order.iter().map(|&i| plane[i]))
+                .collect();
+        }
+        self.header.flags &= !super::header::FLAG_IMPORTANCE_ORDERED;
+    }
+
+    /// True when every attribute holds `header.count` records of the right width.
+    pub fn is_consistent(&self) -> bool {
+        let n = self.header.count as usize;
+        let ok = |a: &Attribute, c: usize| a.components() == c && a.codes.len() == n * c;
+        ok(&self.positions, 2)
+            && ok(&self.covariance, 3)
+            && ok(&self.colors, 3)
+            && self.opacity.as_ref().is_none_or(|a| ok(a, 1))
+    }
+}

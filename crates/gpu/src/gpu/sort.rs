@@ -1,0 +1,350 @@
+//! A stable, deterministic GPU radix sort of `(u32 key, u32 value)` pairs, for binning
+//! Gaussians into tiles on the GPU: pairs are emitted in Gaussian order and keyed by tile,
+//! and stability keeps each tile's Gaussians in stored order, as the CPU's binning does.
+//!
+//! LSD radix sort with 8-bit digits, `ceil(key_bits / 8)` passes, each of three kernels
+//! (`shaders/sort_*.wgsl`): per-block digit counts, one exclusive scan of them, and a
+//! scatter that ranks equal digits by position, never by atomic counters, so the output
+//! is the same on every run and every adapter. The live length is a `u32` on the GPU
+//! (written by an earlier kernel), which the host never reads: every kernel is dispatched
+//! for the buffers' capacity and ignores the items past the count.
+
+use super::Kernel;
+use super::{Error, ErrorKind, Result};
+use wgpu::util::DeviceExt;
+
+/// Items each invocation of a scan's blocks sums, in the forward half's scan of Gaussians
+/// and in this sort's scan of bins: a block is `GROUP · SCAN_PER` items, one workgroup.
+pub const SCAN_PER: u32 = 16;
+
+/// Items per block, one workgroup's share (`SORT_BLOCK` of the shaders' prelude).
+pub const BLOCK: u32 = 1024;
+/// Bits per digit; `2^DIGIT_BITS` bins (the workgroup size of every sort kernel).
+const DIGIT_BITS: u32 = 8;
+const BINS: u64 = 1 << DIGIT_BITS;
+
+/// The pipelines, built once per device.
+pub struct RadixSort {
+    histogram: Kernel,
+    /// `sort_scan.wgsl`'s `chunks`, `top` and `apply`, sharing one bind group.
+    scan: [Kernel; 3],
+    scatter: Kernel,
+}
+
+impl RadixSort {
+    pub fn new(device: &wgpu::Device) -> RadixSort {
+        RadixSort {
+            histogram: Kernel::new(
+                device,
+                "sort_histogram",
+                &shader!("device/sort_common", "device/sort_histogram"),
+                2,
+                1,
+            ),
+            scan: Kernel::entries(
+                device,
+                "sort_scan",
+                &shader!("device/sort_common", "device/sort_scan"),
+                ["chunks", "top", "apply"],
+                0,
+                2,
+            ),
+            scatter: Kernel::new(
+                device,
+                "sort_scatter",
+                &shader!("device/sort_common", "device/sort_scatter"),
+                4,
+                2,
+            ),
+        }
+    }
+}
+
+/// The bind groups of one pass (one digit).
+struct Pass {
+    histogram: wgpu::BindGroup,
+    scan: wgpu::BindGroup,
+    scatter: wgpu::BindGroup,
+}
+
+/// Scratch buffers and bind groups for sorting `keys`/`values` (each `capacity` u32s,
+/// `STORAGE | COPY_SRC | COPY_DST`) whose live length is `min(count[0], capacity)`.
+///
+/// After [`SortPlan::record`] the first `min(count[0], capacity)` entries of `keys` and
+/// `values` are the pairs sorted by key, equal keys in input order; the entries past them
+/// are unspecified.
+pub struct SortPlan {
+    passes: Vec<Pass>,
+    /// Workgroups per dispatch of the per-block kernels, a 2D grid covering every block.
+    groups: (u32, u32),
+    /// Workgroups of the scan's per-chunk kernels.
+    scan_groups: (u32, u32),
+    /// With an odd pass count the result ends in the scratch buffers: `(scratch keys,
+    /// scratch values, caller's keys, caller's values, bytes)` to copy back.
+    copy_back: Option<(wgpu::Buffer, wgpu::Buffer, wgpu::Buffer, wgpu::Buffer, u64)>,
+}
+
+impl SortPlan {
+    /// Plan the sort of keys below `2^key_bits` (`key_bits ≤ 32`; fewer bits, fewer
+    /// passes). Refuses, with [`ErrorKind::LimitExceeded`], buffers or scratch the device
+    /// cannot bind or dispatch over, and, with [`ErrorKind::InvalidValue`], `key_bits`
+    /// above 32 or buffers smaller than `capacity` (`count` needs 4 bytes). The plan's
+    /// bind groups belong to `sort`'s pipelines: record it with the same `sort`.
+    pub fn new(
+        gpu: &super::Gpu,
+        sort: &RadixSort,
+        keys: &wgpu::Buffer,
+        values: &wgpu::Buffer,
+        count: &wgpu::Buffer,
+        capacity: u32,
+        key_bits: u32,
+    ) -> Result<SortPlan> {
+        if key_bits > 32 {
+            return Err(Error::new(
+                ErrorKind::InvalidValue,
+                format!("radix sort of {key_bits}-bit keys (at most 32)"),
+            ));
+        }
+        let bytes = u64::from(capacity) * 4;
+        let passes = key_bits.div_ceil(DIGIT_BITS);
+        let device = &gpu.device;
+        let max_binding = gpu.max_binding;
+        let blocks = capacity.div_ceil(BLOCK);
+        let hist_bytes = BINS * u64::from(blocks) * 4;
+        let max_groups = gpu.max_groups.max(1);
+        let gx = blocks.clamp(1, max_groups);
+        let groups = (gx, blocks.div_ceil(gx));
+        if bytes > max_binding || hist_bytes > max_binding || groups.1 > max_groups {
+            return Err(Error::new(
+                ErrorKind::LimitExceeded,
+                format!("a radix sort of {capacity} pairs exceeds what the GPU can bind"),
+            ));
+        }
+        if keys.size() < bytes || values.size() < bytes || count.size() < 4 {
+            return Err(Error::new(
+                ErrorKind::InvalidValue,
+                "radix sort buffers smaller than their capacity",
+            ));
+        }
+        // Nothing to sort, or every key is 0 (a stable sort is then the identity).
+        if capacity == 0 || passes == 0 {
+            return Ok(SortPlan {
+                passes: Vec::new(),
+                groups: (0, 0),
+                scan_groups: (0, 0),
+                copy_back: None,
+            });
+        }
+        let storage = |size: u64| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("sort scratch"),
+                size,
+                usage: wgpu::BufferUsages::STORAGE
+                    | wgpu::BufferUsages::COPY_SRC
+                    | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        };
+        let (scratch_keys, scratch_values, hist) =
+            (storage(bytes), storage(bytes), storage(hist_bytes));
+        // The scan's chunks of the histogram, one workgroup each.
+        let chunks = (BINS * u64::from(blocks)).div_ceil(BINS * u64::from(SCAN_PER)) as u32;
+        let chunk_sums = storage(u64::from(chunks.max(1)) * 4);
+        let cx = chunks.clamp(1, max_groups);
+        let scan_groups = (cx, chunks.div_ceil(cx).max(1));
+        // Pass p reads `from` and writes `to`, alternating caller → scratch → caller. The
+        // bind groups keep the scratch buffers alive (wgpu counts references).
+        let (mut from, mut to) = ((keys, values), (&scratch_keys, &scratch_values));
+        let passes = (0..passes)
+            .map(|p| {
+                let params = [p * DIGIT_BITS, blocks, capacity, 0u32];
+                let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("sort params"),
+                    contents: bytemuck::cast_slice(&params),
+                    usage: wgpu::BufferUsages::UNIFORM,
+                });
+                let pass = Pass {
+                    histogram: sort
+                        .histogram
+                        .bind(device, &[&params, count, from.0, &hist]),
+                    scan: sort.scan[0].bind(device, &[&params, &hist, &chunk_sums]),
+                    scatter: sort
+                        .scatter
+                        .bind(device, &[&params, count, from.0, from.1, &hist, to.0, to.1]),
+                };
+                std::mem::swap(&mut from, &mut to);
+                pass
+            })
+            .collect::<Vec<_>>();
+        let copy_back = (passes.len() % 2 == 1).then(|| {
+            (
+                scratch_keys,
+                scratch_values,
+                keys.clone(),
+                values.clone(),
+                bytes,
+            )
+        });
+        Ok(SortPlan {
+            passes,
+            groups,
+            scan_groups,
+            copy_back,
+        })
+    }
+
+    /// Record the whole sort into `encoder`: one compute pass (wgpu orders the dispatches
+    /// that write and then read a buffer), then the copy back when the pass count is odd.
+    pub fn record(&self, sort: &RadixSort, encoder: &mut wgpu::CommandEncoder) {
+        if self.passes.is_empty() {
+            return;
+        }
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("radix sort"),
+                timestamp_writes: None,
+            });
+            for p in &self.passes {
+                sort.histogram
+                    .dispatch(&mut pass, &p.histogram, self.groups);
+                sort.scan[0].dispatch(&mut pass, &p.scan, self.scan_groups);
+                sort.scan[1].dispatch(&mut pass, &p.scan, (1, 1));
+                sort.scan[2].dispatch(&mut pass, &p.scan, self.scan_groups);
+                sort.scatter.dispatch(&mut pass, &p.scatter, self.groups);
+            }
+        }
+        if let Some((sk, sv, k, v, bytes)) = &self.copy_back {
+            encoder.copy_buffer_to_buffer(sk, 0, k, 0, *bytes);
+            encoder.copy_buffer_to_buffer(sv, 0, v, 0, *bytes);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use gsi_optim::rng::SplitMix64;
+
+    use super::super::tests::gpu;
+
+    fn buffer(gpu: &super::super::Gpu, data: &[u32]) -> wgpu::Buffer {
+        gpu.storage(bytemuck::cast_slice(data))
+    }
+
+    fn read(gpu: &super::super::Gpu, buf: &wgpu::Buffer, len: usize) -> Vec<u32> {
+        let enc = gpu.encoder();
+        let [bytes] = gpu.read_back(enc, [buf]).unwrap();
+        bytemuck::cast_slice::<u8, u32>(&bytes)[..len].to_vec()
+    }
+
+    /// Sort `keys` (values: their indices) on the GPU with `count` live pairs and check the
+    /// live head against the CPU's stable sort of the first `min(count, len)` pairs.
+    fn check(gpu: &super::super::Gpu, sort: &RadixSort, keys: &[u32], count: u32, key_bits: u32) {
+        let capacity = keys.len() as u32;
+        let values: Vec<u32> = (0..capacity).collect();
+        let (kb, vb, cb) = (
+            buffer(gpu, keys),
+            buffer(gpu, &values),
+            buffer(gpu, &[count]),
+        );
+        let plan = SortPlan::new(gpu, sort, &kb, &vb, &cb, capacity, key_bits).unwrap();
+        let mut enc = gpu.encoder();
+        plan.record(sort, &mut enc);
+        gpu.submit([enc.finish()]);
+        let live = count.min(capacity) as usize;
+        let mut want: Vec<(u32, u32)> = keys[..live].iter().copied().zip(values).collect();
+        want.sort_by_key(|&(k, _)| k);
+        let got: Vec<(u32, u32)> = read(gpu, &kb, live)
+            .into_iter()
+            .zip(read(gpu, &vb, live))
+            .collect();
+        if let Some(i) = (0..live).find(|&i| got[i] != want[i]) {
+            panic!(
+                "n={capacity} count={count} bits={key_bits}: at {i} got {:?}, want {:?}",
+                got[i], want[i]
+            );
+        }
+    }
+
+    /// `n` keys below `2^bits` drawn from a pool of about `n / 8` values, so that most
+    /// keys repeat, yet spread over every digit.
+    fn random_keys(rng: &mut SplitMix64, n: usize, bits: u32) -> Vec<u32> {
+        let mask = if bits == 32 {
+            u32::MAX
+        } else {
+            (1u32 << bits) - 1
+        };
+        let pool: Vec<u32> = (0..n / 8 + 1)
+            .map(|_| rng.next_u64() as u32 & mask)
+            .collect();
+        (0..n)
+            .map(|_| pool[(rng.next_u64() % pool.len() as u64) as usize])
+            .collect()
+    }
+
+    #[test]
+    fn matches_a_stable_cpu_sort() {
+        let Some(gpu) = gpu() else { return };
+        let sort = RadixSort::new(&gpu.device);
+        let mut rng = SplitMix64::new(7);
+        for bits in [8, 11, 16, 24, 32] {
+            for n in [0, 1, 255, 1024, 1025, 100_000] {
+                let keys = random_keys(&mut rng, n, bits);
+                check(&gpu, &sort, &keys, n as u32, bits);
+            }
+        }
+    }
+
+    #[test]
+    fn ignores_pairs_past_the_count() {
+        let Some(gpu) = gpu() else { return };
+        let sort = RadixSort::new(&gpu.device);
+        let mut rng = SplitMix64::new(11);
+        for (n, count, bits) in [
+            (5000, 3001, 16),
+            (5000, 0, 16),
+            (3000, 1024, 11),
+            (3000, 2047, 24),
+        ] {
+            let keys = random_keys(&mut rng, n, bits);
+            check(&gpu, &sort, &keys, count, bits);
+        }
+        // A count beyond the capacity sorts the whole buffer.
+        let keys = random_keys(&mut rng, 2000, 16);
+        check(&gpu, &sort, &keys, 2100, 16);
+    }
+
+    #[test]
+    fn sorted_and_reversed_input() {
+        let Some(gpu) = gpu() else { return };
+        let sort = RadixSort::new(&gpu.device);
+        let n = 10_000u32;
+        let sorted: Vec<u32> = (0..n).map(|i| i / 3).collect();
+        let reversed: Vec<u32> = sorted.iter().rev().copied().collect();
+        for bits in [12, 16] {
+            check(&gpu, &sort, &sorted, n, bits);
+            check(&gpu, &sort, &reversed, n, bits);
+        }
+        // One key for everything: the values must come back in order.
+        check(&gpu, &sort, &vec![5; 3000], 3000, 16);
+    }
+
+    #[test]
+    fn refuses_what_it_cannot_sort() {
+        let Some(gpu) = gpu() else { return };
+        let sort = RadixSort::new(&gpu.device);
+        let (k, v, c) = (
+            buffer(&gpu, &[0; 16]),
+            buffer(&gpu, &[0; 16]),
+            buffer(&gpu, &[0]),
+        );
+        let plan = |capacity, bits| SortPlan::new(&gpu, &sort, &k, &v, &c, capacity, bits);
+        let kind = |r: Result<SortPlan>| r.err().map(|e| e.kind());
+        assert_eq!(kind(plan(16, 33)), Some(ErrorKind::InvalidValue));
+        assert_eq!(kind(plan(17, 16)), Some(ErrorKind::InvalidValue));
+        // 16 GiB per buffer: beyond any adapter's storage binding.
+        assert_eq!(kind(plan(u32::MAX, 16)), Some(ErrorKind::LimitExceeded));
+        assert!(plan(16, 32).is_ok());
+        assert!(plan(0, 16).is_ok());
+    }
+}

@@ -1,0 +1,297 @@
+//! Gaussians to pixels.
+//!
+//! Rendering is defined per pixel by `format-spec.md` §6, in `f32` and in a fixed order,
+//! so that every renderer of this crate (this CPU one, a GPU one, a differentiable one)
+//! agrees on what a file *means*. The pieces are kept apart for that reason:
+//!
+//! * [`project`]: per-Gaussian preprocessing into pixel space ([`Projected`]). It is the
+//!   only place where a covariance becomes a conic and a pixel box, so other renderers
+//!   reuse it rather than re-deriving the clamps.
+//! * [`Projected::alpha_at`]: the per-pixel rule, written once, readably.
+//! * `tiles`, `cpu` and `lanes`: the CPU renderer. Tiles only decide *which* Gaussians a
+//!   pixel visits (those whose pixel box holds it), never in what order, and `lanes`
+//!   evaluates eight pixels at once with the same binary32 operations, so the tiled result
+//!   is bit-identical to a naive loop over all Gaussians for every pixel.
+//!
+//! Without a tone curve the output is linear in the stored (sRGB-encoded) colour values
+//! and is not clamped: `sum` blending may overshoot `[0, 1]`, and a caller that
+//! post-processes (enhancement, metrics) wants to see that. [`RgbImage::to_rgb8`] is
+//! where clamping happens. A scene with a tone curve (spec §6.6, written by stage 2)
+//! shows every blended value through it, in `[0, 1]`.
+
+mod cpu;
+pub mod lanes;
+mod project;
+mod tiles;
+
+/// The output layouts [`render_as`] writes, for the decoder API's own limits.
+pub use cpu::{Rgb8 as Rgb8Out, RgbF32Bytes as RgbF32BytesOut, Rgba8 as Rgba8Out};
+
+#[cfg(feature = "encode")]
+pub use project::Rect;
+pub use project::{project, project_scene, PixelBox, Projected};
+#[cfg(any(feature = "encode", feature = "gpu"))]
+pub use tiles::TileLists;
+
+use gsi_format::format::{Error, ErrorKind, Limits, Result};
+use gsi_format::model::Scene;
+
+/// Side of a square tile, in pixels.
+pub const TILE: u32 = 16;
+
+/// A rendered image: row-major, three `f32` per pixel, in the stored colour encoding.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RgbImage {
+    pub width: u32,
+    pub height: u32,
+    /// `width * height * 3` values, `[r, g, b]` per pixel, rows top to bottom.
+    /// Not clamped: values may lie outside `[0, 1]`.
+    pub data: Vec<f32>,
+}
+
+impl RgbImage {
+    /// An image from 8-bit RGB samples (`width·height·3` of them, rows top to bottom),
+    /// each `v / 255` in `f32`: how every front end (the command-line tool, the Python
+    /// package) hands an 8-bit image to the encoder, so that the same pixels give the same
+    /// file. `None` where the count does not match the size.
+    pub fn from_rgb8(width: u32, height: u32, samples: &[u8]) -> Option<RgbImage> {
+        Self::from_samples(width, height, samples, |v| f32::from(v) / 255.0)
+    }
+
+    /// An image from 16-bit RGB samples, each `v / 65535` in `f32` (as [`Self::from_rgb8`]).
+    pub fn from_rgb16(width: u32, height: u32, samples: &[u16]) -> Option<RgbImage> {
+        Self::from_samples(width, height, samples, |v| f32::from(v) / 65535.0)
+    }
+
+    fn from_samples<T: Copy>(
+        width: u32,
+        height: u32,
+        samples: &[T],
+        to_f32: impl Fn(T) -> f32,
+    ) -> Option<RgbImage> {
+        let n = (width as usize)
+            .checked_mul(height as usize)?
+            .checked_mul(3)?;
+        (samples.len() == n).then(|| RgbImage {
+            width,
+            height,
+            data: samples.iter().map(|&v| to_f32(v)).collect(),
+        })
+    }
+
+    /// 8-bit RGB, three bytes per pixel.
+    ///
+    /// Each channel is clamped to `[0, 1]`, then mapped to `floor(c·255 + 0.5)`
+    /// (round half up, in `f32`); NaN becomes 0. The rule is fixed so that golden hashes
+    /// of decoded images do not depend on the platform's rounding mode or on `round()`.
+    pub fn to_rgb8(&self) -> Vec<u8> {
+        self.data.iter().map(|&c| to_u8(c)).collect()
+    }
+
+    /// 8-bit RGBA, four bytes per pixel, alpha 255 (the background is opaque black).
+    pub fn to_rgba8(&self) -> Vec<u8> {
+        let mut out = Vec::with_capacity(self.data.len() / 3 * 4);
+        for px in self.data.chunks_exact(3) {
+            out.extend(px.iter().map(|&c| to_u8(c)));
+            out.push(255);
+        }
+        out
+    }
+}
+
+/// `floor(clamp(c, 0, 1) · 255 + 0.5)`. The value before the cast lies in `[0.5, 255.5]`,
+/// where truncation is `floor` (without a call to `floorf`); the cast maps NaN to 0.
+#[inline]
+pub fn to_u8(c: f32) -> u8 {
+    (c.clamp(0.0, 1.0) * 255.0 + 0.5) as u8
+}
+
+/// Render `scene` at `width × height` on the CPU.
+///
+/// Any output size is allowed: geometry is normalized, so another size samples the same
+/// continuous image at other pixel centres. Refused: an empty size
+/// ([`ErrorKind::InvalidValue`]), or one over the default [`Limits`]' `max_output_pixels`,
+/// `max_alloc` for the `width·height·12` bytes this allocates, or `max_render_work`
+/// for the Gaussian–pixel pairs it would evaluate ([`ErrorKind::LimitExceeded`]) — the
+/// bounds the GPU renderer applies too. To render with other limits, or into 8 bits
+/// without the `f32` image, use [`gsi_render::decode::Reader`] or the `render_*_into` functions with a
+/// buffer of your own (which apply the default limits' work bound).
+///
+/// With the `parallel` feature, tile rows are spread over rayon's pool; the result is
+/// bit-identical to the sequential build.
+pub fn render(scene: &Scene, width: u32, height: u32) -> Result<RgbImage> {
+    let limits = Limits::default();
+    let mut data = allocate(width, height, 3, 4, &limits)?;
+    render_as::<cpu::RgbF32>(scene, width, height, &mut data, &limits)?;
+    Ok(RgbImage {
+        width,
+        height,
+        data,
+    })
+}
+
+/// 8-bit RGB of `scene` at `width × height` in a new buffer (the values
+/// [`RgbImage::to_rgb8`] gives, with no `f32` image made), refused over `limits`: the
+/// output's pixels, and its `width·height·3` bytes against `max_alloc`.
+pub fn render_rgb8(scene: &Scene, width: u32, height: u32, limits: &Limits) -> Result<Vec<u8>> {
+    let mut rgb = allocate(width, height, 3, 1, limits)?;
+    render_as::<cpu::Rgb8>(scene, width, height, &mut rgb, limits)?;
+    Ok(rgb)
+}
+
+/// A zeroed buffer of `per_pixel` values of `bytes` bytes each for a `width × height`
+/// output, after checking its size and its allocation against `limits`.
+fn allocate<T: Clone + Default>(
+    width: u32,
+    height: u32,
+    per_pixel: usize,
+    bytes: u64,
+    limits: &Limits,
+) -> Result<Vec<T>> {
+    let len = buffer_len(width, height, per_pixel, limits)?;
+    limits.check_alloc(len as u64 * bytes, "the rendered image")?;
+    Ok(vec![T::default(); len])
+}
+
+/// Render into a caller-provided buffer of exactly `width * height * 3` floats
+/// (overwritten, not accumulated into), so that repeated renders reuse one allocation.
+pub fn render_into(scene: &Scene, width: u32, height: u32, out: &mut [f32]) -> Result<()> {
+    render_as::<cpu::RgbF32>(scene, width, height, out, &Limits::default())
+}
+
+/// Render into a caller's buffer of exactly `width * height * 3` bytes of 8-bit RGB, the
+/// values [`RgbImage::to_rgb8`] gives. Tiles are blended in a band-sized scratch buffer
+/// and written straight into `out`: no whole-image `f32` copy is made.
+pub fn render_rgb8_into(scene: &Scene, width: u32, height: u32, out: &mut [u8]) -> Result<()> {
+    render_as::<cpu::Rgb8>(scene, width, height, out, &Limits::default())
+}
+
+/// As [`render_rgb8_into`], in 8-bit RGBA (`width * height * 4` bytes, alpha 255).
+pub fn render_rgba8_into(scene: &Scene, width: u32, height: u32, out: &mut [u8]) -> Result<()> {
+    render_as::<cpu::Rgba8>(scene, width, height, out, &Limits::default())
+}
+
+/// As [`render_into`], with the floats written as native-endian bytes
+/// (`width * height * 12`), for byte-typed buffers.
+pub fn render_f32_bytes_into(scene: &Scene, width: u32, height: u32, out: &mut [u8]) -> Result<()> {
+    render_as::<cpu::RgbF32Bytes>(scene, width, height, out, &Limits::default())
+}
+
+/// The Gaussian–pixel pairs a render of `proj` evaluates at most: the pixels of every
+/// Gaussian's box (already cut to the output), summed, saturating.
+pub fn render_work(proj: &[Projected]) -> u64 {
+    proj.iter()
+        .map(|p| {
+            let b = &p.bbox;
+            u64::from(b.x1 - b.x0 + 1) * u64::from(b.y1 - b.y0 + 1)
+        })
+        .fold(0u64, u64::saturating_add)
+}
+
+/// Check `scene` and `out`, project, check the work against `limits`, and render in
+/// `O`'s layout.
+pub fn render_as<O: cpu::Output>(
+    scene: &Scene,
+    width: u32,
+    height: u32,
+    out: &mut [O::Elem],
+    limits: &Limits,
+) -> Result<()> {
+    let len = buffer_len(width, height, O::PER_PIXEL, &Limits::unlimited())?;
+    if out.len() != len {
+        return Err(Error::new(
+            ErrorKind::InvalidValue,
+            format!(
+                "output buffer holds {} values, {width}x{height} needs {len}",
+                out.len()
+            ),
+        ));
+    }
+    if !scene.gaussians.is_consistent() {
+        return Err(Error::new(
+            ErrorKind::InvalidValue,
+            "Gaussian attribute vectors have different lengths",
+        ));
+    }
+    if u32::try_from(scene.gaussians.len()).is_err() {
+        // Tile lists hold `u32` indices.
+        return Err(Error::new(
+            ErrorKind::LimitExceeded,
+            "more than 2^32 - 1 Gaussians",
+        ));
+    }
+    let projected = project_scene(scene, width, height);
+    limits.check_render_work(render_work(&projected), width, height)?;
+    let parallel = cfg!(feature = "parallel");
+    let tone = scene.tone.as_ref();
+    cpu::render_projected::<O>(
+        &projected,
+        scene.blend,
+        tone,
+        (width, height),
+        out,
+        parallel,
+    );
+    Ok(())
+}
+
+/// Number of values of a `width × height` buffer of `per_pixel` values, refusing empty
+/// sizes, sizes over `limits` and unaddressable ones.
+pub fn buffer_len(width: u32, height: u32, per_pixel: usize, limits: &Limits) -> Result<usize> {
+    limits.check_output(width, height)?;
+    usize::try_from(u64::from(width) * u64::from(height))
+        .ok()
+        .and_then(|px| px.checked_mul(per_pixel))
+        .ok_or_else(|| {
+            Error::new(
+                ErrorKind::LimitExceeded,
+                format!("output {width}x{height} does not fit in memory"),
+            )
+        })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn to_u8_rounds_half_up_after_clamping() {
+        let cases = [
+            (-1.0, 0),
+            (0.0, 0),
+            (0.25, 64),
+            (0.5, 128),
+            (1.0, 255),
+            (7.0, 255),
+            (f32::NAN, 0),
+            (f32::NEG_INFINITY, 0),
+            (f32::INFINITY, 255),
+        ];
+        for (c, want) in cases {
+            assert_eq!(to_u8(c), want, "{c}");
+        }
+    }
+
+    #[test]
+    fn buffer_len_refuses_empty_sizes() {
+        let any = Limits::unlimited();
+        assert_eq!(
+            buffer_len(0, 5, 3, &any).unwrap_err().kind(),
+            ErrorKind::InvalidValue
+        );
+        assert_eq!(
+            buffer_len(5, 0, 3, &any).unwrap_err().kind(),
+            ErrorKind::InvalidValue
+        );
+        assert_eq!(buffer_len(2, 3, 3, &any).unwrap(), 18);
+        assert_eq!(buffer_len(2, 3, 4, &any).unwrap(), 24);
+        let small = Limits {
+            max_output_pixels: 5,
+            ..Limits::default()
+        };
+        assert_eq!(
+            buffer_len(2, 3, 3, &small).unwrap_err().kind(),
+            ErrorKind::LimitExceeded
+        );
+    }
+}

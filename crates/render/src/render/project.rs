@@ -1,0 +1,316 @@
+//! Per-Gaussian preprocessing: from the normalized model to pixel space (spec §6).
+//!
+//! Every renderer starts here, so that the clamps, the conic and the pixel box, which
+//! decide which pixels a Gaussian may touch, are computed once and the same way.
+
+use super::TILE;
+use gsi_format::contract::{
+    ALPHA_MAX, ALPHA_MIN, COLOR_MAX, CORRELATION_MAX, EXTENT_SIGMAS, VAR_MAX, VAR_MIN,
+};
+use gsi_format::model::{Blend, Scene};
+
+/// Inclusive range of pixel columns `x0..=x1` and rows `y0..=y1`; never empty.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct PixelBox {
+    pub x0: u32,
+    pub y0: u32,
+    pub x1: u32,
+    pub y1: u32,
+}
+
+/// Pixels `x0..x1` × `y0..y1`, exclusive ends: a tile, or the part of one that a band
+/// of rows holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Rect {
+    pub x0: u32,
+    pub x1: u32,
+    pub y0: u32,
+    pub y1: u32,
+}
+
+impl Rect {
+    /// Tile `t` of a `width × height` output, tiles `tiles_x` to a row, cut to the output.
+    pub fn of_tile(t: usize, tiles_x: u32, width: u32, height: u32) -> Rect {
+        let (tx, ty) = (t as u32 % tiles_x, t as u32 / tiles_x);
+        Rect {
+            x0: tx * TILE,
+            x1: ((tx + 1) * TILE).min(width),
+            y0: ty * TILE,
+            y1: ((ty + 1) * TILE).min(height),
+        }
+    }
+
+    /// Index of pixel `(i, j)` in a tile-local buffer of `TILE × TILE`.
+    #[inline(always)]
+    pub fn local(&self, i: u32, j: u32) -> usize {
+        ((j - self.y0) * TILE + (i - self.x0)) as usize
+    }
+}
+
+impl PixelBox {
+    /// Columns and rows of `rect` inside the box; `None` when they do not meet.
+    #[inline]
+    pub fn clip(&self, rect: Rect) -> Option<(std::ops::Range<u32>, std::ops::Range<u32>)> {
+        let xs = self.x0.max(rect.x0)..(self.x1 + 1).min(rect.x1);
+        let ys = self.y0.max(rect.y0)..(self.y1 + 1).min(rect.y1);
+        (!xs.is_empty() && !ys.is_empty()).then_some((xs, ys))
+    }
+
+    /// Whether pixel `(i, j)` lies in the box.
+    #[inline]
+    pub fn contains(&self, i: u32, j: u32) -> bool {
+        (self.x0..=self.x1).contains(&i) && (self.y0..=self.y1).contains(&j)
+    }
+}
+
+/// One Gaussian in the pixel space of a given output size, ready to be evaluated.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Projected {
+    /// Index of the Gaussian in the scene (stored order).
+    pub index: usize,
+    /// Centre `(mx, my)` in pixels; pixel `(i, j)` has its centre at `(i + 0.5, j + 0.5)`.
+    pub mean: [f32; 2],
+    /// Inverse pixel covariance `(A, B, C)`: `power = -0.5(A dx² + C dy²) - B dx dy`.
+    pub conic: [f32; 3],
+    /// Opacity in `[ALPHA_MIN, 1]` (a Gaussian below `ALPHA_MIN` is never projected).
+    pub opacity: f32,
+    /// Colour as stored, clamped to `±COLOR_MAX`, non-finite components replaced by 0.
+    pub color: [f32; 3],
+    /// Pixels whose centre lies within `EXTENT_SIGMAS` standard deviations along x and y,
+    /// clipped to the image. No pixel outside it is ever touched.
+    pub bbox: PixelBox,
+}
+
+impl Projected {
+    /// The weight `alpha` of this Gaussian at pixel `(i, j)`, or `None` where the rules of
+    /// spec §6 skip it (outside the box, `power > 0`, `alpha < ALPHA_MIN`). In `alpha`
+    /// blending the result is capped at `ALPHA_MAX`.
+    ///
+    /// This is the per-pixel contract in its plainest form; the CPU renderer's inner
+    /// loops are specialized copies of it, and tests hold them to it bit for bit.
+    #[inline]
+    pub fn alpha_at(&self, i: u32, j: u32, blend: Blend) -> Option<f32> {
+        if !self.bbox.contains(i, j) {
+            return None;
+        }
+        let [a, b, c] = self.conic;
+        let dx = (i as f32 + 0.5) - self.mean[0];
+        let dy = (j as f32 + 0.5) - self.mean[1];
+        let power = -0.5 * (a * dx * dx + c * dy * dy) - b * dx * dy;
+        if power > 0.0 {
+            return None;
+        }
+        let mut alpha = self.opacity * gsi_format::contract::exp(power);
+        if blend == Blend::Alpha {
+            alpha = alpha.min(ALPHA_MAX);
+        }
+        (alpha >= ALPHA_MIN).then_some(alpha)
+    }
+}
+
+impl Projected {
+    /// A `power` below which `opacity · exp(power) < ALPHA_MIN` for certain, whatever the
+    /// rounding of `exp` and of the product: `ln(ALPHA_MIN / opacity)` less a margin of
+    /// 1e-3, thousands of ulps of `exp`. Only a shortcut: every pixel above it is
+    /// evaluated exactly as the contract says.
+    #[inline]
+    pub fn cutoff(&self) -> f32 {
+        cutoff_of(self.opacity)
+    }
+}
+
+/// [`Projected::cutoff`] for an opacity.
+#[inline]
+fn cutoff_of(opacity: f32) -> f32 {
+    ((f64::from(ALPHA_MIN) / f64::from(opacity)).ln() - 1e-3) as f32
+}
+
+/// Project Gaussian `index` of `scene` for a `width × height` output.
+///
+/// `None` when it can touch no pixel: non-finite centre, empty pixel box, or opacity
+/// below `ALPHA_MIN` (its `alpha` can never reach the threshold, since `power <= 0`).
+///
+/// # Panics
+/// If `index` is out of range or the scene's attribute vectors are inconsistent.
+pub fn project(scene: &Scene, index: usize, width: u32, height: u32) -> Option<Projected> {
+    let g = &scene.gaussians;
+    let (fw, fh) = (width as f32, height as f32);
+
+    // Steps 1-4: normalized covariance, pixel covariance, clamps, conic.
+    let s = scene.cov_param.covariance(g.cov[index]);
+    let a = (s[0] * fw * fw).clamp(VAR_MIN, VAR_MAX);
+    let c = (s[2] * fh * fh).clamp(VAR_MIN, VAR_MAX);
+    let lim = CORRELATION_MAX * (a * c).sqrt();
+    // `covariance` is finite, so `lim` is positive; the guard keeps `clamp` panic-free
+    // should that ever change.
+    if !(lim > 0.0 && lim.is_finite()) {
+        return None;
+    }
+    let b = (s[1] * fw * fh).clamp(-lim, lim);
+    let det = a * c - b * b;
+    let conic = [c / det, -b / det, a / det];
+    if !conic.iter().all(|x| x.is_finite()) {
+        return None;
+    }
+
+    // Step 5: centre. An infinite centre could only give an empty box anyway.
+    let [u, v] = g.positions[index];
+    let mean = [u * fw, v * fh];
+    if !(mean[0].is_finite() && mean[1].is_finite()) {
+        return None;
+    }
+
+    // Step 6: pixel box.
+    let (x0, x1) = pixel_span(mean[0], EXTENT_SIGMAS * a.sqrt(), width)?;
+    let (y0, y1) = pixel_span(mean[1], EXTENT_SIGMAS * c.sqrt(), height)?;
+
+    // Step 7: opacity and colour.
+    let o = g.opacity_of(index);
+    let opacity = if o.is_finite() {
+        o.clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    if opacity < ALPHA_MIN {
+        return None;
+    }
+    let color = g.colors[index].map(|x| {
+        if x.is_finite() {
+            x.clamp(-COLOR_MAX, COLOR_MAX)
+        } else {
+            0.0
+        }
+    });
+
+    Some(Projected {
+        index,
+        mean,
+        conic,
+        opacity,
+        color,
+        bbox: PixelBox { x0, y0, x1, y1 },
+    })
+}
+
+/// Every Gaussian of `scene` that can touch a pixel of a `width × height` output, in
+/// stored order (which `alpha` blending and bit-exact `sum` accumulation depend on).
+///
+/// # Panics
+/// If the scene's attribute vectors are inconsistent ([`gsi_format::model::GaussianSet::is_consistent`]).
+pub fn project_scene(scene: &Scene, width: u32, height: u32) -> Vec<Projected> {
+    (0..scene.gaussians.len())
+        .filter_map(|i| project(scene, i, width, height))
+        .collect()
+}
+
+/// Pixels `i` of `0..n` whose centre `i + 0.5` lies in `[m - r, m + r]`, as an inclusive
+/// range: `ceil(m - r - 0.5) ..= floor(m + r - 0.5)`, clipped. Computed in `f32` and
+/// clamped in float before the cast, so a centre far outside the image cannot overflow.
+fn pixel_span(m: f32, r: f32, n: u32) -> Option<(u32, u32)> {
+    let lo = (m - r - 0.5).ceil();
+    let hi = (m + r - 0.5).floor();
+    // Also rejects NaN.
+    if !(lo <= hi && hi >= 0.0) {
+        return None;
+    }
+    let last = n.checked_sub(1)?;
+    let limit = n as f32;
+    let lo = lo.clamp(0.0, limit) as u64;
+    let hi = (hi.clamp(0.0, limit) as u64).min(u64::from(last));
+    if lo > hi {
+        return None;
+    }
+    // Both are at most `last`, a u32.
+    Some((lo as u32, hi as u32))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use gsi_format::model::{CovParam, GaussianSet};
+
+    fn one(pos: [f32; 2], cov: [f32; 3], opacity: Option<f32>) -> Scene {
+        Scene {
+            tone: None,
+            width: 10,
+            height: 10,
+            blend: Blend::Sum,
+            cov_param: CovParam::Cholesky,
+            gaussians: GaussianSet {
+                positions: vec![pos],
+                cov: vec![cov],
+                colors: vec![[1.0, f32::NAN, -2.0]],
+                opacity: opacity.map(|o| vec![o]),
+            },
+        }
+    }
+
+    #[test]
+    fn pixel_span_follows_centres() {
+        // Centre 5.0, radius 1: centres 4.5 and 5.5 are inside, 3.5 and 6.5 are not.
+        assert_eq!(pixel_span(5.0, 1.0, 10), Some((4, 5)));
+        // Exactly on a centre counts.
+        assert_eq!(pixel_span(5.5, 1.0, 10), Some((4, 6)));
+        assert_eq!(pixel_span(5.0, 0.1, 10), None);
+        assert_eq!(pixel_span(-3.0, 1.0, 10), None);
+        assert_eq!(pixel_span(12.0, 1.0, 10), None);
+        assert_eq!(pixel_span(0.0, 1e30, 10), Some((0, 9)));
+        assert_eq!(pixel_span(1e30, 1.0, 10), None);
+        assert_eq!(pixel_span(-1e30, 1e12, u32::MAX), None);
+        assert_eq!(pixel_span(f32::NAN, 1.0, 10), None);
+        assert_eq!(pixel_span(0.5, 1e12, u32::MAX), Some((0, u32::MAX - 1)));
+    }
+
+    #[test]
+    fn projection_applies_clamps() {
+        // 8 px output, Cholesky l11 = 1/8 -> a = 1 px², c = VAR_MIN (clamped from 0).
+        let p = project(&one([0.5625, 0.5625], [0.125, 0.0, 0.0], None), 0, 8, 8).unwrap();
+        assert_eq!(p.mean, [4.5, 4.5]);
+        let det = 1.0 * VAR_MIN;
+        assert_eq!(p.conic, [VAR_MIN / det, 0.0, 1.0 / det]);
+        // x: 3 px either side of 4.5; y: 0.03 px, only the centre row.
+        assert_eq!(
+            p.bbox,
+            PixelBox {
+                x0: 1,
+                y0: 4,
+                x1: 7,
+                y1: 4
+            }
+        );
+        assert_eq!(p.color, [1.0, 0.0, -2.0]);
+        assert_eq!(p.opacity, 1.0);
+        assert_eq!(p.alpha_at(4, 4, Blend::Sum), Some(1.0));
+        assert_eq!(p.alpha_at(4, 4, Blend::Alpha), Some(ALPHA_MAX));
+        assert_eq!(
+            p.alpha_at(5, 4, Blend::Sum),
+            Some(gsi_format::contract::exp(-0.5))
+        );
+        assert_eq!(p.alpha_at(4, 5, Blend::Sum), None);
+        assert_eq!(p.alpha_at(0, 4, Blend::Sum), None);
+    }
+
+    #[test]
+    fn projection_skips_what_cannot_show() {
+        let p = |pos, op| project(&one(pos, [0.1, 0.0, 0.1], op), 0, 10, 10);
+        assert!(p([0.5, 0.5], Some(0.0)).is_none());
+        assert!(p([0.5, 0.5], Some(f32::NAN)).is_none());
+        assert!(p([0.5, 0.5], Some(f32::INFINITY)).is_none());
+        assert_eq!(p([0.5, 0.5], Some(7.0)).unwrap().opacity, 1.0);
+        assert!(p([f32::NAN, 0.5], None).is_none());
+        assert!(p([0.5, f32::INFINITY], None).is_none());
+        assert!(p([-5.0, 0.5], None).is_none());
+        assert!(p([0.5, 1e30], None).is_none());
+    }
+
+    #[test]
+    fn cutoff_is_below_the_threshold() {
+        for o in [ALPHA_MIN, 0.01, 0.1, 0.5, 0.99, 1.0] {
+            let cut = cutoff_of(o);
+            // Just below the cut-off, alpha is under the threshold; at the true
+            // threshold, it is (about) on it.
+            assert!(o * cut.exp() < ALPHA_MIN, "{o}");
+            assert!(o * (cut + 2e-3).exp() >= ALPHA_MIN, "{o}");
+        }
+    }
+}
