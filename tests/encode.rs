@@ -126,13 +126,17 @@ fn fitting_improves_and_the_stored_psnr_is_the_decoded_one() {
 
 /// The last colour solve, on the geometry as stored, gains what the quantization-aware
 /// steps left to the colours, in both blend modes, and moves nothing else.
+#[cfg(feature = "lab")]
 #[test]
 fn the_stored_colours_are_solved_for_the_stored_geometry() {
     let t = scene_like(64, 48);
     for blend in [Blend::Sum, Blend::Alpha] {
         let with = opts(Budget::Gaussians(60), 60, blend);
         let without = EncodeOptions {
-            solve_stored_colors: false,
+            lab: gsi::fit::Lab {
+                solve_stored_colors: false,
+                ..Default::default()
+            },
             ..with.clone()
         };
         let solved = encode(&t, &with, gsi::Device::Cpu, &mut |_| {}).unwrap();
@@ -385,6 +389,7 @@ fn a_coarse_start_is_refined_at_full_resolution() {
 /// A dark image is fitted at full scale and stored at its own level: the file renders
 /// the dark image (not the brightened copy the fit saw), says so in `gCRM`, and keeps
 /// more of it than a fit at its own level, most of all where brightening will show it.
+#[cfg(feature = "lab")]
 #[test]
 fn a_dark_image_is_fitted_at_full_scale_and_stored_as_it_is() {
     let bright = scene_like(64, 48);
@@ -394,7 +399,10 @@ fn a_dark_image_is_fitted_at_full_scale_and_stored_as_it_is() {
     for blend in [Blend::Sum, Blend::Alpha] {
         let lifted = opts(Budget::Gaussians(60), 120, blend);
         let as_is = EncodeOptions {
-            lift_dark: false,
+            lab: gsi::fit::Lab {
+                lift_dark: false,
+                ..Default::default()
+            },
             ..lifted.clone()
         };
         let a = encode(&t, &lifted, gsi::Device::Cpu, &mut |_| {}).unwrap();
@@ -430,7 +438,10 @@ fn a_dark_image_is_fitted_at_full_scale_and_stored_as_it_is() {
     // A normally exposed image is fitted as it is: the same bytes either way.
     let o = opts(Budget::Gaussians(40), 30, Blend::Sum);
     let off = EncodeOptions {
-        lift_dark: false,
+        lab: gsi::fit::Lab {
+            lift_dark: false,
+            ..Default::default()
+        },
         ..o.clone()
     };
     assert_eq!(

@@ -205,6 +205,7 @@ mod fitting {
     /// At the default learning rates the loss falls on average: the mean of the last
     /// tenth of the reports is below the mean of the first tenth, for every init,
     /// blend mode and loss.
+    #[cfg(feature = "lab")]
     #[test]
     fn loss_decreases_on_average() {
         let t = textured(64, 48);
@@ -217,7 +218,10 @@ mod fitting {
                         init,
                         blend,
                         loss,
-                        densify: false,
+                        lab: gsi::fit::Lab {
+                            densify: false,
+                            ..Default::default()
+                        },
                         ..EncodeOptions::default()
                     };
                     let name = format!("{init:?} {blend:?} {loss:?}");

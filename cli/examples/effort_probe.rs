@@ -52,7 +52,10 @@ fn main() {
         iterations: number(0) as u32,
         coarse: (fraction > 0.0 && factor > 1).then_some(Coarse { factor, fraction }),
         color_solve: number(3) as u32,
-        solve_stored_colors: std::env::var("GSI_PROBE_STORED").map_or(true, |v| v != "0"),
+        lab: gsi::fit::Lab {
+            solve_stored_colors: std::env::var("GSI_PROBE_STORED").map_or(true, |v| v != "0"),
+            ..Default::default()
+        },
         blend: match std::env::var("GSI_PROBE_BLEND").as_deref() {
             Ok("alpha") => gsi::model::Blend::Alpha,
             _ => gsi::model::Blend::Sum,

@@ -41,7 +41,10 @@ fn configs(levels: &[u8], before: bool) -> Vec<Config> {
             coarse: None,
             color_solve: 10,
             lr: BEFORE_RATES,
-            solve_stored_colors: false,
+            lab: gsi::fit::Lab {
+                solve_stored_colors: false,
+                ..Default::default()
+            },
             ..base.clone()
         },
     };
@@ -183,7 +186,7 @@ fn is_before(c: &Config) -> bool {
         && c.opts.coarse.is_none()
         && c.opts.color_solve == 10
         && c.opts.lr == BEFORE_RATES
-        && !c.opts.solve_stored_colors
+        && !c.opts.lab.solve_stored_colors
 }
 
 /// The learning rates of the fit before effort levels (GaussianImage's), which the

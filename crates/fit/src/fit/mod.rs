@@ -84,13 +84,24 @@ pub struct EncodeOptions {
     pub lr: LearningRates,
     /// Bit depths; `None` picks them from the image size.
     pub bits: Option<BitDepths>,
-    /// Fraction of the iterations spent on quantization-aware fine-tuning.
-    pub qat_fraction: f32,
-    /// Prune and re-place Gaussians during fitting.
-    pub densify: bool,
     /// Conjugate-gradient iterations of each least-squares colour solve (after pruning
     /// and re-placement); the first solve and the last take twice as many.
     pub color_solve: u32,
+    /// Parts of the encoder turned off to measure what they buy (feature `lab`; without
+    /// it every part is on, as [`Lab::default`]).
+    #[cfg(feature = "lab")]
+    pub lab: Lab,
+}
+
+/// Switches that turn parts of the encoder off, for the reports and tests that measure
+/// what each part buys (feature `lab`). Every default is on: a file is always made with
+/// all of them unless an experiment says otherwise.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Lab {
+    /// Fraction of the iterations spent on quantization-aware fine-tuning (0.2).
+    pub qat_fraction: f32,
+    /// Prune and re-place Gaussians during fitting.
+    pub densify: bool,
     /// Whether the stored colours are solved again for the quantized geometry, after the
     /// last step (off: the stored colours as the last step left them, the effort report's
     /// reference; on, +0.35 dB at the default level on the validation images).
@@ -99,6 +110,27 @@ pub struct EncodeOptions {
     /// gain ([`dark`]), so that its shadows get Gaussians too. Images whose bright end
     /// reaches half of full scale are fitted as they are either way.
     pub lift_dark: bool,
+}
+
+impl Default for Lab {
+    fn default() -> Self {
+        Lab {
+            qat_fraction: 0.2,
+            densify: true,
+            solve_stored_colors: true,
+            lift_dark: true,
+        }
+    }
+}
+
+impl EncodeOptions {
+    /// The switches in force: the caller's with feature `lab`, all on without it.
+    fn lab(&self) -> Lab {
+        #[cfg(feature = "lab")]
+        return self.lab;
+        #[cfg(not(feature = "lab"))]
+        Lab::default()
+    }
 }
 
 /// Coarse-to-fine fitting: the first `fraction` of the iterations fit the image reduced
@@ -165,11 +197,9 @@ impl Default for EncodeOptions {
             loss: Loss::L2,
             lr: LEARNING_RATES,
             bits: None,
-            qat_fraction: 0.2,
-            densify: true,
             color_solve: 10,
-            solve_stored_colors: true,
-            lift_dark: true,
+            #[cfg(feature = "lab")]
+            lab: Lab::default(),
         }
     }
 }
@@ -774,7 +804,7 @@ struct Phase {
     step_work: f64,
     work_before: f64,
     work_all: f64,
-    /// Whether the last `qat_fraction` of the steps render the quantized parameters.
+    /// Whether the last `Lab::qat_fraction` of the steps render the quantized parameters.
     qat: bool,
 }
 
@@ -821,7 +851,7 @@ impl Runner<'_, '_> {
         let opts = self.opts;
         let total = phase.steps;
         let qat_from = if phase.qat {
-            ((1.0 - opts.qat_fraction) * total as f32) as u32
+            ((1.0 - opts.lab().qat_fraction) * total as f32) as u32
         } else {
             u32::MAX
         };
@@ -829,7 +859,7 @@ impl Runner<'_, '_> {
         // Measurements may come a step late (a GPU fit's): each says which step it is.
         let base = fitter.steps;
         for it in 0..total {
-            if opts.densify && densify_at.contains(&it) && it > 0 {
+            if opts.lab().densify && densify_at.contains(&it) && it > 0 {
                 let n_now = fitter.params.len();
                 let n = self.filling(fitter).unwrap_or(n_now);
                 fitter.prune_and_grow(0.5, n, n);
@@ -976,7 +1006,7 @@ pub fn encode(
 ) -> Result<Encoded, Error> {
     check_target(target)?;
     let truth = target;
-    let gain = if opts.lift_dark {
+    let gain = if opts.lab().lift_dark {
         dark::gain(truth)
     } else {
         1.0
@@ -1164,7 +1194,7 @@ fn finish(
     let float = gsi_render::render::render(&scene, t.width, t.height)?;
     let float_psnr = loss::psnr8(&float.data, &t.data, t.width, t.height);
     let mut records = Records::from_scene(&scene, bits);
-    if opts.solve_stored_colors && opts.color_solve > 0 {
+    if opts.lab().solve_stored_colors && opts.color_solve > 0 {
         // The quantization-aware steps move colours by small steps against a geometry whose
         // codes keep changing; once the geometry is fixed, the colours that best render it
         // are one linear solve away: +0.35 dB at the default level on the validation
@@ -1205,7 +1235,7 @@ fn finish(
     if opts.color_solve != 10 {
         settings += &format!("\ncolor_solve={}", opts.color_solve);
     }
-    if !opts.solve_stored_colors {
+    if !opts.lab().solve_stored_colors {
         settings += "\nsolve_stored_colors=false";
     }
     if gain > 1.0 {

@@ -377,6 +377,7 @@ fn position_rates_follow_the_image_size() {
 /// parameter by its whole learning rate, the PSNR fell by 2 dB after the switch
 /// (this image: 26.9 dB at the first full-resolution step, 24.8 dB ten steps later; with
 /// the state kept, 27.8 dB).
+#[cfg(feature = "lab")]
 #[test]
 fn the_fine_steps_go_on_from_the_coarse_ones() {
     let scene = random_scene(
@@ -395,8 +396,11 @@ fn the_fine_steps_go_on_from_the_coarse_ones() {
             factor: 2,
             fraction: 0.5,
         }),
-        densify: false,
-        qat_fraction: 0.0,
+        lab: super::Lab {
+            densify: false,
+            qat_fraction: 0.0,
+            ..Default::default()
+        },
         ..EncodeOptions::default()
     };
     let e = super::encode(&target, &opts, gsi_gpu::Device::Cpu, &mut |_| {}).unwrap();
