@@ -209,17 +209,7 @@ pub fn fit(
     progress: &mut dyn FnMut(&Progress),
 ) -> Fitted {
     let mut session = Session::new(scene, opts, backbone);
-    match device {
-        gsi_gpu::Device::Cpu => {}
-        #[cfg(feature = "gpu")]
-        gsi_gpu::Device::Gpu(gpu) => {
-            if let Err(e) = session.use_gpu(gpu) {
-                session.fallback = Some(format!("enhancement runs on the CPU: {e}"));
-            }
-        }
-        // A variant this build does not know (`Device` is non-exhaustive): the CPU.
-        _ => {}
-    }
+    session.on_device(device);
     for _ in 0..opts.iterations {
         progress(&session.step());
     }
@@ -257,9 +247,8 @@ pub struct Session<'a> {
     traces: Option<Vec<Trace>>,
     /// Why the session left its GPU for the CPU, once it has.
     fallback: Option<String>,
-    /// Where the mixture runs, when not on the CPU ([`Session::use_gpu`]).
-    #[cfg(feature = "gpu")]
-    gpu: Option<super::gpu::GpuMixture<'a>>,
+    /// Where the mixture runs: the CPU, or its GPU twin ([`Session::use_gpu`]).
+    twin: super::twin::Twin<'a>,
 }
 
 impl<'a> Session<'a> {
@@ -321,8 +310,7 @@ impl<'a> Session<'a> {
             g_map: vec![0.0; cells * opts.experts],
             traces: Trace::for_chunks(n, opts.experts, opts.hidden),
             fallback: None,
-            #[cfg(feature = "gpu")]
-            gpu: None,
+            twin: super::twin::Twin::cpu(),
             a,
             low,
             feats,
@@ -402,75 +390,73 @@ impl<'a> Session<'a> {
         (terms, map_terms)
     }
 
+    /// Run the mixture on `device` (see [`Session::use_gpu`]); a device this build has
+    /// no twin for, or one that cannot hold the mixture, leaves it on the CPU, the latter
+    /// with the reason in [`Fitted::fallback`].
+    pub fn on_device(&mut self, device: gsi_gpu::Device<'a>) {
+        let c0 = &self.scene.gaussians.colors;
+        match self.twin.open(device, &self.enh, CHUNK, &self.taps, c0) {
+            // The GPU keeps its own trace; the CPU's comes back if the GPU fails.
+            Ok(true) => self.traces = None,
+            Ok(false) => {}
+            Err(e) => self.fallback = Some(format!("enhancement runs on the CPU: {e}")),
+        }
+    }
+
     /// Run the mixture (every Gaussian's mixing weights and operators, forward and
     /// backward: most of an iteration) on `gpu`; the render, the loss and the head stay
     /// on the CPU. Fails, leaving the session on the CPU, when the adapter cannot hold
     /// it. Should the GPU fail later, the session says so once and goes on on the CPU.
     #[cfg(feature = "gpu")]
-    pub fn use_gpu(&mut self, gpu: &'a gsi_gpu::gpu::Gpu) -> gsi_gpu::gpu::Result<()> {
-        let e = &self.enh;
-        self.gpu = Some(super::gpu::GpuMixture::new(
-            gpu,
-            e.experts,
-            e.hidden,
-            e.clamp,
-            e.map.len(),
-            CHUNK,
-            &self.taps,
-            &self.scene.gaussians.colors,
-        )?);
-        // The GPU keeps its own trace; the CPU's comes back if the GPU fails.
+    pub fn use_gpu(&mut self, gpu: &'a gsi_gpu::gpu::Gpu) -> Result<(), String> {
+        let c0 = &self.scene.gaussians.colors;
+        self.twin.open_on(gpu, &self.enh, CHUNK, &self.taps, c0)?;
         self.traces = None;
         Ok(())
     }
 
     /// [`mix_forward`] on the GPU; false where there is none, or it failed.
     fn mix_forward_on_gpu(&mut self) -> bool {
-        #[cfg(feature = "gpu")]
-        if let Some(g) = &self.gpu {
-            match g.forward(&self.enh.map, &self.enh.params, &mut self.colors) {
-                Ok(()) => return true,
-                Err(e) => self.gpu_failed(&e),
+        match self.twin.forward(&self.enh, &mut self.colors) {
+            Ok(ran) => ran,
+            Err(e) => {
+                self.gpu_failed(&e);
+                false
             }
         }
-        false
     }
 
     /// [`mix_backward`] on the GPU; false where there is none, or it failed (in which
     /// case the CPU's forward pass runs again, for the activations it needs).
     fn mix_backward_on_gpu(&mut self) -> bool {
-        #[cfg(feature = "gpu")]
-        if let Some(g) = &self.gpu {
-            let head = self.lay.head_len();
-            match g.backward(
-                &self.g_col,
-                &self.taps,
-                &mut self.g_map,
-                &mut self.grad[head..],
-            ) {
-                Ok(()) => return true,
-                Err(e) => {
-                    self.gpu_failed(&e);
-                    self.g_map.fill(0.0);
-                    self.grad.fill(0.0);
-                    mix_forward(
-                        &self.enh,
-                        &self.taps,
-                        &self.scene.gaussians.colors,
-                        &mut self.colors,
-                        self.traces.as_deref_mut(),
-                    );
-                }
+        let head = self.lay.head_len();
+        let ran = self.twin.backward(
+            &self.g_col,
+            &self.taps,
+            &mut self.g_map,
+            &mut self.grad[head..],
+        );
+        match ran {
+            Ok(ran) => ran,
+            Err(e) => {
+                self.gpu_failed(&e);
+                self.g_map.fill(0.0);
+                self.grad.fill(0.0);
+                mix_forward(
+                    &self.enh,
+                    &self.taps,
+                    &self.scene.gaussians.colors,
+                    &mut self.colors,
+                    self.traces.as_deref_mut(),
+                );
+                false
             }
         }
-        false
     }
 
-    #[cfg(feature = "gpu")]
-    fn gpu_failed(&mut self, e: &gsi_gpu::gpu::Error) {
+    fn gpu_failed(&mut self, e: &str) {
         self.fallback
             .get_or_insert_with(|| format!("enhancement continues on the CPU: {e}"));
-        self.gpu = None;
         let n = self.scene.gaussians.len();
         self.traces = Trace::for_chunks(n, self.opts.experts, self.opts.hidden);
     }
@@ -1034,7 +1020,7 @@ mod tests {
                 a = cpu.step().terms.total;
                 b = on_gpu.step().terms.total;
             }
-            assert!(on_gpu.gpu.is_some(), "the GPU failed");
+            assert!(on_gpu.twin.is_gpu(), "the GPU failed");
             assert!(
                 ((a - b) / a).abs() < 1e-3,
                 "{blend:?} K {experts} after {} iterations: {a} vs {b}",

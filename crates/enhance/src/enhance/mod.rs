@@ -37,12 +37,18 @@ pub mod features;
 pub mod fit;
 #[cfg(all(feature = "encode", feature = "gpu"))]
 pub(crate) mod gpu;
+// The seam: one build with the GPU twin, one without (same methods).
 #[cfg(feature = "encode")]
 pub mod light;
 #[cfg(feature = "encode")]
 pub mod loss;
 #[cfg(feature = "encode")]
 pub mod operator;
+#[cfg(all(feature = "encode", feature = "gpu"))]
+mod twin;
+#[cfg(all(feature = "encode", not(feature = "gpu")))]
+#[path = "twin_cpu.rs"]
+mod twin;
 #[cfg(feature = "encode")]
 pub mod working;
 

@@ -38,6 +38,12 @@ pub mod params;
 pub mod raster;
 #[cfg(feature = "gpu")]
 pub(crate) mod resident;
+// The seam: one build with the GPU twin, one without (same methods).
+#[cfg(feature = "gpu")]
+mod twin;
+#[cfg(not(feature = "gpu"))]
+#[path = "twin_cpu.rs"]
+mod twin;
 
 pub use effort::Effort;
 pub use error::Error;
@@ -299,16 +305,6 @@ fn coded_bytes_per_gaussian(scene: &Scene, bits: BitDepths) -> f32 {
     bytes as f32 / n
 }
 
-/// A resident fit's report as the fitter counts steps (`base` taken before it started).
-#[cfg(feature = "gpu")]
-fn measured(r: resident::StepReport, base: u64) -> Measured {
-    Measured {
-        step: base + r.step,
-        loss: r.loss,
-        psnr: r.psnr,
-    }
-}
-
 /// Fixed bytes of a file: signature, header, gCRM, chunk frames and quantizer preambles.
 const FILE_OVERHEAD: f32 = 300.0;
 
@@ -343,19 +339,14 @@ pub struct Fitter<'a> {
     adam: Adam,
     loss: loss::LossFn,
     seed: u64,
-    /// Why the fitter left its GPU for the CPU, once it has.
-    fallback: Option<String>,
     /// Steps taken.
     steps: u64,
     /// A measurement collected early (by [`Fitter::sync`]), for the next step or flush.
     ready: Option<Measured>,
-    /// Where [`Fitter::step`] runs, when not on the CPU.
-    #[cfg(feature = "gpu")]
-    gpu: Option<&'a gsi_gpu::gpu::Gpu>,
-    /// The L2 fit living on the GPU between [`Fitter::sync`]s, and the steps taken
-    /// before it started; while it exists, `params` and `adam` are those of the last sync.
-    #[cfg(feature = "gpu")]
-    resident: Option<(resident::ResidentFit<'a>, u64)>,
+    /// Where [`Fitter::step`] runs (the CPU, or its GPU twin), and why it left the GPU if
+    /// it did. While a fit is resident there, `params` and `adam` are those of the last
+    /// [`Fitter::sync`].
+    twin: twin::Twin<'a>,
 }
 
 impl<'a> Fitter<'a> {
@@ -407,13 +398,9 @@ impl<'a> Fitter<'a> {
             params,
             loss: loss::LossFn::new(loss),
             seed,
-            fallback: None,
             steps: 0,
             ready: None,
-            #[cfg(feature = "gpu")]
-            gpu: None,
-            #[cfg(feature = "gpu")]
-            resident: None,
+            twin: twin::Twin::cpu(),
         }
     }
 
@@ -505,15 +492,7 @@ impl<'a> Fitter<'a> {
         if let Some(m) = self.ready.take() {
             return Some(m);
         }
-        #[cfg(feature = "gpu")]
-        if let Some((resident, base)) = self.resident.as_mut() {
-            let base = *base;
-            match resident.collect() {
-                Ok(report) => return report.map(|r| measured(r, base)),
-                Err(e) => self.resident_failed(&e),
-            }
-        }
-        None
+        self.twin.flush(&mut self.params, &mut self.adam)
     }
 
     fn step_now(
@@ -522,8 +501,13 @@ impl<'a> Fitter<'a> {
         qat: Option<BitDepths>,
         measure: bool,
     ) -> Option<Measured> {
-        #[cfg(feature = "gpu")]
-        if let Some(done) = self.step_resident(lr, qat, measure) {
+        let l2 = self.loss.kind() == Loss::L2;
+        let (p, a) = (&mut self.params, &mut self.adam);
+        let target = self.target;
+        if let Some(done) = self
+            .twin
+            .step(target, self.blend, l2, p, a, self.steps, lr, qat, measure)
+        {
             return done;
         }
         let (w, h) = (self.target.width, self.target.height);
@@ -550,12 +534,12 @@ impl<'a> Fitter<'a> {
     /// If the GPU fails, the fitter continues on the CPU and [`Fitter::fallback`] says why.
     #[cfg(feature = "gpu")]
     pub fn use_gpu(&mut self, gpu: &'a gsi_gpu::gpu::Gpu) {
-        self.gpu = Some(gpu);
+        self.twin.use_gpu(gpu);
     }
 
     /// Why the fitter left its GPU for the CPU, if it did.
     pub fn fallback(&self) -> Option<&str> {
-        self.fallback.as_deref()
+        self.twin.fallback()
     }
 
     /// Bring the parameters and Adam's state back from the GPU, if they live there, so
@@ -563,79 +547,8 @@ impl<'a> Fitter<'a> {
     /// the final measurement call it themselves. A measurement still to come is kept for
     /// the next [`Fitter::step`] or [`Fitter::flush`].
     pub fn sync(&mut self) {
-        #[cfg(feature = "gpu")]
-        if let Some((resident, base)) = self.resident.as_mut() {
-            let base = *base;
-            match resident.collect() {
-                Ok(Some(r)) => self.ready = self.ready.or(Some(measured(r, base))),
-                Ok(None) => {}
-                // The parameters may still come back: `resident_failed` tries.
-                Err(e) => return self.resident_failed(&e),
-            }
-        }
-        #[cfg(feature = "gpu")]
-        if let Some((resident, _)) = self.resident.take() {
-            match resident.download() {
-                Ok((params, adam)) => {
-                    self.params = params;
-                    self.adam = adam;
-                }
-                Err(e) => self.gpu_failed(&e),
-            }
-        }
-    }
-
-    /// A step of the resident GPU fit, or `None` where this fitter does not take one
-    /// (no GPU, a loss other than L2, or the GPU failed and the step falls to the CPU).
-    #[cfg(feature = "gpu")]
-    fn step_resident(
-        &mut self,
-        lr: &LearningRates,
-        qat: Option<BitDepths>,
-        measure: bool,
-    ) -> Option<Option<Measured>> {
-        let gpu = self.gpu?;
-        if self.loss.kind() != Loss::L2 {
-            return None;
-        }
-        if self.resident.is_none() {
-            match resident::ResidentFit::new(gpu, self.target, self.blend, &self.params, &self.adam)
-            {
-                Ok(r) => self.resident = Some((r, self.steps - 1)),
-                Err(e) => {
-                    self.gpu_failed(&e);
-                    return None;
-                }
-            }
-        }
-        let (resident, base) = self.resident.as_mut()?;
-        let base = *base;
-        match resident.step(lr, qat, measure) {
-            Ok(report) => Some(report.map(|r| measured(r, base))),
-            Err(e) => {
-                self.resident_failed(&e);
-                None
-            }
-        }
-    }
-
-    /// Leave a failed resident fit for the CPU, continuing from what the GPU holds if it
-    /// can still say, else from the last sync.
-    #[cfg(feature = "gpu")]
-    fn resident_failed(&mut self, e: &gsi_gpu::gpu::Error) {
-        if let Some(Ok((params, adam))) = self.resident.take().map(|(r, _)| r.download()) {
-            self.params = params;
-            self.adam = adam;
-        }
-        self.gpu_failed(e);
-    }
-
-    #[cfg(feature = "gpu")]
-    fn gpu_failed(&mut self, e: &gsi_gpu::gpu::Error) {
-        self.fallback
-            .get_or_insert_with(|| format!("fitting continues on the CPU: {e}"));
-        self.gpu = None;
-        self.resident = None;
+        self.twin
+            .sync(&mut self.params, &mut self.adam, &mut self.ready);
     }
 
     /// The step's render, loss (with the PSNR when `measure`) and gradients: on the GPU
@@ -646,22 +559,14 @@ impl<'a> Fitter<'a> {
         measure: bool,
     ) -> (f32, Option<f64>, Vec<raster::ProjGrad>) {
         let (w, h) = (self.target.width, self.target.height);
-        #[cfg(feature = "gpu")]
-        if let Some(gpu) = self.gpu {
-            let mut on_gpu = || -> gsi_gpu::gpu::Result<_> {
-                let image = gpu.render_projected(projected, self.blend, w, h)?;
-                let (value, dl, psnr) = self.score(&image.data, measure);
-                let pg = backward_gpu::backward(gpu, projected, self.blend, w, h, &dl)?;
-                Ok((
-                    value,
-                    psnr,
-                    pg.iter().map(raster::ProjGrad::from_slot).collect(),
-                ))
-            };
-            match on_gpu() {
-                Ok(done) => return done,
-                Err(e) => self.gpu_failed(&e),
-            }
+        let (target, loss) = (self.target, &mut self.loss);
+        let mut score = |image: &[f32]| {
+            let (value, dl) = loss.eval(image, &target.data, w, h);
+            let psnr = measure.then(|| loss::psnr8(image, &target.data, w, h));
+            (value, dl, psnr)
+        };
+        if let Some(done) = self.twin.passes(projected, self.blend, (w, h), &mut score) {
+            return done;
         }
         if self.blend == Blend::Sum && self.loss.kind() == Loss::L2 {
             let step = raster::step_l2_sum(projected, &self.target.data, w, h, measure);
@@ -981,15 +886,8 @@ fn coarse_start(
 }
 
 /// Take `fitter`'s steps on `device`.
-#[cfg_attr(not(feature = "gpu"), allow(unused_variables))]
 fn on_device<'a>(fitter: &mut Fitter<'a>, device: gsi_gpu::Device<'a>) {
-    match device {
-        gsi_gpu::Device::Cpu => {}
-        #[cfg(feature = "gpu")]
-        gsi_gpu::Device::Gpu(gpu) => fitter.use_gpu(gpu),
-        // A variant this build does not know (`Device` is non-exhaustive): the CPU.
-        _ => {}
-    }
+    fitter.twin = twin::Twin::on(device);
 }
 
 /// Fit `target` and write the file, with the optimizer steps on `device`.
@@ -1096,7 +994,7 @@ pub fn encode(
             };
             runner.run(&mut fitter, phase);
             fitter.sync();
-            let fallback = fitter.fallback.take();
+            let fallback = fitter.twin.take_fallback();
             let params = std::mem::take(&mut fitter.params);
             let adam = fitter.adam;
             let mut full = Fitter::with_params(target, params, opts.blend, opts.loss, opts.seed);
@@ -1108,10 +1006,8 @@ pub fn encode(
             // images, and a colour solve here gained nothing more (BENCHMARKS.md, the
             // coarse fit handed on whole).
             full.adam = adam;
-            full.fallback = fallback;
-            if full.fallback.is_none() {
-                on_device(&mut full, device);
-            }
+            // A GPU the coarse steps left stays left, and the reason is kept.
+            full.twin = twin::Twin::after(fallback, device);
             phase.work_before = f64::from(*steps) * step_work;
             phase.first = *steps;
             phase.steps = fine;
@@ -1168,7 +1064,7 @@ pub fn encode(
         result = finish(&mut fitter, bits, opts, truth, gain)?;
     }
     result.curve = runner.curve;
-    result.fallback = fitter.fallback.take();
+    result.fallback = fitter.twin.take_fallback();
     Ok(result)
 }
 
