@@ -714,3 +714,52 @@ fn spec_exp_table() {
         assert_eq!(f32::from_bits(bits), value, "{name}");
     }
 }
+
+/// §7.1.1's worked example reads into every typed field and is written back byte for
+/// byte; an encode writes settings of that grammar only (no line left unread), with its
+/// options in them.
+#[test]
+fn spec_settings_example() {
+    use gsi::format::settings::{BudgetKind, InitKind, LossKind};
+    let spec =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/format-spec.md")).unwrap();
+    let section = spec.split("#### 7.1.1").nth(1).expect("spec has §7.1.1");
+    let text = section
+        .split("```")
+        .nth(1)
+        .expect("the section has the example");
+    let text = text.trim_start_matches('\n').trim_end_matches('\n');
+    let s = format::EncoderSettings::parse(text);
+    assert!(s.other.is_empty(), "{:?}", s.other);
+    assert_eq!(s.encoder.as_deref(), Some("gsi 0.1.0"));
+    assert_eq!(s.init, Some(InitKind::Adaptive));
+    assert_eq!((s.iterations, s.seed), (Some(600), Some(0)));
+    assert_eq!(s.budget, Some(BudgetKind::Bpp(1.0)));
+    assert_eq!(s.loss, Some(LossKind::L2));
+    assert_eq!(s.bits, Some([12, 6, 8, 6, 7]));
+    assert_eq!(s.coarse, Some((2, 0.5)));
+    assert_eq!(
+        (s.color_solve, s.solve_stored_colors, s.dark_gain),
+        (None, None, None)
+    );
+    assert_eq!(s.to_text(), text);
+
+    let scene = random_scene(3, SceneSpec::new(24, 16, 40, Blend::Sum));
+    let target = gsi::render::render(&scene, 24, 16).unwrap();
+    let opts = gsi::fit::EncodeOptions {
+        budget: gsi::fit::Budget::Gaussians(30),
+        iterations: 20,
+        seed: 5,
+        loss: gsi::fit::Loss::L1MsSsim { lambda: 0.2 },
+        ..Default::default()
+    };
+    let e = gsi::fit::encode(&target, &opts, gsi::Device::Cpu, &mut |_| {}).unwrap();
+    let file = format::read_file(&e.bytes[..], Limits::default()).unwrap();
+    let written = file.metadata.expect("gCRM").settings;
+    let s = format::EncoderSettings::parse(&written);
+    assert!(s.other.is_empty(), "{written}");
+    assert_eq!(s.budget, Some(BudgetKind::Gaussians(30)));
+    assert_eq!(s.loss, Some(LossKind::L1MsSsim { lambda: 0.2 }));
+    assert_eq!((s.iterations, s.seed), (Some(20), Some(5)));
+    assert_eq!(s.to_text(), written);
+}

@@ -1,5 +1,7 @@
 //! Any bytes through the container decoder: `Ok` or `Err`, never a panic, never more
-//! than the limits allow. A valid file must also survive re-encoding unchanged.
+//! than the limits allow. A valid file must also survive re-encoding unchanged, and its
+//! `gCRM` settings text (§7.1.1) read into typed fields and written again must read back
+//! into the same fields.
 
 #![no_main]
 
@@ -12,6 +14,11 @@ fuzz_target!(|data: &[u8]| {
     let Some(file) = common::parse_deep(data) else {
         return;
     };
+    if let Some(meta) = &file.metadata {
+        let settings = gsi::format::EncoderSettings::parse(&meta.settings);
+        let again = gsi::format::EncoderSettings::parse(&settings.to_text());
+        assert_eq!(again, settings, "settings change through a write");
+    }
 
     // Whatever the decoder accepts, the encoder writes back to the same records (codes,
     // quantizers, header fields) and ancillary chunks, with method 2 where the file is of

@@ -890,6 +890,43 @@ fn on_device<'a>(fitter: &mut Fitter<'a>, device: gsi_gpu::Device<'a>) {
     fitter.twin = twin::Twin::on(device);
 }
 
+/// What `gCRM` records of an encode (spec §7.1.1): the options that shaped the file, the
+/// last four only where they differ from the defaults, so that files made with the
+/// settings before them stay the same.
+fn settings_of(opts: &EncodeOptions, bits: &BitDepths, gain: f32) -> format::EncoderSettings {
+    use format::settings::{BudgetKind, InitKind, LossKind};
+    format::EncoderSettings {
+        encoder: Some(format!("gsi {}", env!("CARGO_PKG_VERSION"))),
+        init: Some(match opts.init {
+            Init::Adaptive => InitKind::Adaptive,
+            Init::Random => InitKind::Random,
+        }),
+        iterations: Some(opts.iterations),
+        seed: Some(opts.seed),
+        budget: Some(match opts.budget {
+            Budget::Gaussians(n) => BudgetKind::Gaussians(n as u64),
+            Budget::Bpp(b) => BudgetKind::Bpp(b),
+            Budget::TargetPsnr(p) => BudgetKind::TargetPsnr(p),
+        }),
+        loss: Some(match opts.loss {
+            Loss::L2 => LossKind::L2,
+            Loss::L1MsSsim { lambda } => LossKind::L1MsSsim { lambda },
+        }),
+        bits: Some([
+            bits.position,
+            bits.covariance,
+            bits.color,
+            bits.opacity,
+            bits.angle,
+        ]),
+        coarse: opts.coarse.map(|c| (c.factor, c.fraction)),
+        color_solve: (opts.color_solve != 10).then_some(opts.color_solve),
+        solve_stored_colors: (!opts.lab().solve_stored_colors).then_some(false),
+        dark_gain: (gain > 1.0).then_some(gain),
+        other: Vec::new(),
+    }
+}
+
 /// Fit `target` and write the file, with the optimizer steps on `device`.
 ///
 /// On a GPU ([`Fitter::use_gpu`]) the whole step runs there with the L2 loss, the render
@@ -1110,33 +1147,7 @@ fn finish(
         ));
     }
     let psnr = loss::psnr8(&decoded.data, &t.data, t.width, t.height);
-    let mut settings = format!(
-        "encoder=gsi {}\ninit={:?}\niterations={}\nseed={}\nbudget={:?}\nloss={:?}\nbits={}/{}/{}/{}/{}",
-        env!("CARGO_PKG_VERSION"),
-        opts.init,
-        opts.iterations,
-        opts.seed,
-        opts.budget,
-        opts.loss,
-        bits.position,
-        bits.covariance,
-        bits.color,
-        bits.opacity,
-        bits.angle
-    );
-    // Written only where used, so that files of the settings before them stay the same.
-    if let Some(c) = opts.coarse {
-        settings += &format!("\ncoarse={}/{}", c.factor, c.fraction);
-    }
-    if opts.color_solve != 10 {
-        settings += &format!("\ncolor_solve={}", opts.color_solve);
-    }
-    if !opts.lab().solve_stored_colors {
-        settings += "\nsolve_stored_colors=false";
-    }
-    if gain > 1.0 {
-        settings += &format!("\ndark_gain={gain}");
-    }
+    let settings = settings_of(opts, &bits, gain).to_text();
     let bytes = format::to_bytes(
         &records,
         &WriteOptions {

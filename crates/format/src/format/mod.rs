@@ -16,6 +16,7 @@ mod meta;
 pub mod quant;
 mod reader;
 mod records;
+pub mod settings;
 pub mod trc;
 mod writer;
 
@@ -35,6 +36,7 @@ pub use meta::CompressionMeta;
 pub use quant::{Quantizer, MAX_BITS};
 pub use reader::{read_file, Decoder, GsiFile};
 pub use records::{Attribute, BitDepths, Records};
+pub use settings::EncoderSettings;
 pub use writer::{to_bytes, write_file, WriteOptions};
 
 /// Small fixtures for doc examples and tests. Not part of the stable API.
