@@ -13,7 +13,7 @@
 //! rayon) and the C API, depending on `bitvec`, `byteorder`, `crc32fast`, `zstd` and
 //! `rayon` only; `default-features = false` drops rayon. The stages are features: `encode`
 //! (fitting and enhancement), `gpu` (wgpu), `image` (`image::open` of `.gsi` files, see
-//! [`image_support`]). The `gsi` command-line tool is the separate `gsi-cli` package.
+//! `gsi::image_support`). The `gsi` command-line tool is the separate `gsi-cli` package.
 //!
 //! One call decodes a file from any reader at any size, with limits suited to untrusted
 //! input; a [`Reader`] renders into buffers you own, in 8-bit RGB/RGBA or `f32`:

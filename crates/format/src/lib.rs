@@ -1,6 +1,6 @@
 //! The `.gsi` container and the model it holds: the bottom layer of gsi.
 //!
-//! [`format`] turns bytes into records and back (framing, CRC, [`format::Limits`],
+//! [`format`](mod@format) turns bytes into records and back (framing, CRC, [`format::Limits`],
 //! quantizers, bit-packed and range-coded attributes, the stage-2 chunks), [`model`] is the
 //! float Gaussian set every other layer works on, and [`contract`] holds the constants of
 //! the spec's pixel contract (`format-spec.md` §6) that encoder and decoders share. The

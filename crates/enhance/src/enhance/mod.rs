@@ -8,9 +8,9 @@
 //! ([`apply_from`]) or undone exactly ([`ChunkedFile::revert`]). The result is shown
 //! through a tone curve on the blended values (`GTRC`), which sets its exposure.
 //!
-//! [`enhance`] is the front door, as [`gsi_fit::fit::encode`] is stage 1's: it decides
-//! whether the image is low-light at all ([`assess`]), then denoises, fits the mixture,
-//! and sets the curve and local exposure ([`curve`]).
+//! `enhance` (feature `encode`) is the front door, as `fit::encode` is stage 1's: it
+//! decides whether the image is low-light at all (`assess`), then denoises, fits the
+//! mixture, and sets the curve and local exposure (`curve`).
 //!
 //! * [`mixture`]: the enhancer as stored and applied (no rendering needed).
 //! * [`denoise`]: the smoothing across neighbouring Gaussians that comes before it.

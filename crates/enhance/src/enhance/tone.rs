@@ -5,7 +5,7 @@
 //! their `gENH` runs it. Stage 2 no longer writes it: a curve of the blended value set
 //! per Gaussian can only be approached, and on the LOL validation pairs it scored 0.687
 //! SSIM against the 0.793 of the same curve on the blended values, drawing the
-//! Gaussians of stage 1 as streaks (see [`super::curve`]).
+//! Gaussians of stage 1 as streaks (see `enhance::curve`).
 //!
 //! As with the denoising, a `sum` record is a coefficient, and the curve belongs to what
 //! the render shows. Each Gaussian gets the value its centre should show, and the

@@ -165,7 +165,7 @@ pub const LEARNING_RATES: LearningRates = LearningRates {
 };
 
 /// The longer side, in pixels, at which [`EncodeOptions::lr`]'s position rate is meant:
-/// on a longer side it shrinks in proportion ([`rates_for`]), so that a step moves a
+/// on a longer side it shrinks in proportion (`rates_for`), so that a step moves a
 /// Gaussian about as many pixels (0.9 at the start of a fit) on a 12 MP photograph as on
 /// a Kodak image, where in normalized units as such it moved 4.8 pixels a step on a
 /// 4000-pixel side. Kept on that principle: on the scale table's smooth renders, where
@@ -929,7 +929,7 @@ fn settings_of(opts: &EncodeOptions, bits: &BitDepths, gain: f32) -> format::Enc
 
 /// Fit `target` and write the file, with the optimizer steps on `device`.
 ///
-/// On a GPU ([`Fitter::use_gpu`]) the whole step runs there with the L2 loss, the render
+/// On a GPU (`Fitter::use_gpu`) the whole step runs there with the L2 loss, the render
 /// and backward passes with MS-SSIM; initialization, colour solves, pruning and the final
 /// measurement stay on the CPU. A GPU that fails is left for the CPU, and
 /// [`Encoded::fallback`] says why.

@@ -14,7 +14,7 @@ use super::coder::{Decoder, Encoder, Meter, Signed, Sink, Tree};
 use super::error::{invalid, Error, ErrorKind, Result};
 use super::quant::Quantizer;
 
-/// The code itself, through a [`Tree`].
+/// The code itself, through a `Tree`.
 pub const MODE_DIRECT: u8 = 0;
 /// Residual from the previous component of the same Gaussian, requantized (§5.4.3).
 pub const MODE_ACROSS: u8 = 1;

@@ -258,7 +258,7 @@ pub struct BitDepths {
     pub covariance: u8,
     /// The angle of a `log-scale-rotation` covariance (its third component). Apart
     /// because its range is the encoder's choice: the stage-1 encoder keeps every angle
-    /// within a quarter turn ([`gsi_fit::fit::params::canonical_rotation`]), where one bit
+    /// within a quarter turn (`gsi::fit::params::canonical_rotation`), where one bit
     /// fewer than the scales already halves the step a free angle had. A `cholesky`
     /// covariance spends `covariance` on all three components.
     pub angle: u8,

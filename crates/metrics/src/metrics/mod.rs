@@ -50,7 +50,7 @@ use std::fmt;
 pub const WINDOW: u32 = filter::TAPS as u32;
 
 /// A borrowed 8-bit RGB image: row-major, `[r, g, b]` per pixel, rows top to bottom
-/// (the layout of `image::RgbImage` and of [`gsi_render::render::RgbImage::to_rgb8`]).
+/// (the layout of `image::RgbImage` and of `gsi::RgbImage::to_rgb8`).
 ///
 /// The length is checked once, here, so that no metric has to index defensively.
 #[derive(Clone, Copy, Debug)]

@@ -20,17 +20,21 @@
 //! shows every blended value through it, in `[0, 1]`.
 
 mod cpu;
+#[doc(hidden)]
 pub mod lanes;
 mod project;
 mod tiles;
 
 /// The output layouts [`render_as`] writes, for the decoder API's own limits.
+#[doc(hidden)]
 pub use cpu::{Rgb8 as Rgb8Out, RgbF32Bytes as RgbF32BytesOut, Rgba8 as Rgba8Out};
 
 #[cfg(feature = "encode")]
+#[doc(hidden)]
 pub use project::Rect;
 pub use project::{project, project_scene, PixelBox, Projected};
 #[cfg(any(feature = "encode", feature = "gpu"))]
+#[doc(hidden)]
 pub use tiles::TileLists;
 
 use gsi_format::format::{Error, ErrorKind, Limits, Result};
@@ -102,6 +106,7 @@ impl RgbImage {
 /// `floor(clamp(c, 0, 1) · 255 + 0.5)`. The value before the cast lies in `[0.5, 255.5]`,
 /// where truncation is `floor` (without a call to `floorf`); the cast maps NaN to 0.
 #[inline]
+#[doc(hidden)]
 pub fn to_u8(c: f32) -> u8 {
     (c.clamp(0.0, 1.0) * 255.0 + 0.5) as u8
 }
@@ -114,7 +119,7 @@ pub fn to_u8(c: f32) -> u8 {
 /// `max_alloc` for the `width·height·12` bytes this allocates, or `max_render_work`
 /// for the Gaussian–pixel pairs it would evaluate ([`ErrorKind::LimitExceeded`]) — the
 /// bounds the GPU renderer applies too. To render with other limits, or into 8 bits
-/// without the `f32` image, use [`gsi_render::decode::Reader`] or the `render_*_into` functions with a
+/// without the `f32` image, use [`crate::decode::Reader`] or the `render_*_into` functions with a
 /// buffer of your own (which apply the default limits' work bound).
 ///
 /// With the `parallel` feature, tile rows are spread over rayon's pool; the result is
@@ -190,6 +195,7 @@ pub fn render_work(proj: &[Projected]) -> u64 {
 
 /// Check `scene` and `out`, project, check the work against `limits`, and render in
 /// `O`'s layout.
+#[doc(hidden)]
 pub fn render_as<O: cpu::Output>(
     scene: &Scene,
     width: u32,
@@ -237,6 +243,7 @@ pub fn render_as<O: cpu::Output>(
 
 /// Number of values of a `width × height` buffer of `per_pixel` values, refusing empty
 /// sizes, sizes over `limits` and unaddressable ones.
+#[doc(hidden)]
 pub fn buffer_len(width: u32, height: u32, per_pixel: usize, limits: &Limits) -> Result<usize> {
     limits.check_output(width, height)?;
     usize::try_from(u64::from(width) * u64::from(height))
