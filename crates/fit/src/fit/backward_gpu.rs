@@ -1,4 +1,4 @@
-//! Stage 1's backward pass on the GPU: the gradients [`super::raster::backward`] gives,
+//! Stage 1's backward pass on the GPU: the gradients `fit::raster::backward` gives,
 //! for both blend modes, from `shaders/fit/backward_*.wgsl`, on the device layer's
 //! kernels and buffers ([`gsi_gpu::gpu`]).
 
@@ -44,7 +44,7 @@ impl BackwardKernels {
 
 /// Gradients of a loss with respect to each projected Gaussian on `gpu`, given
 /// `dl_dimage` (`width·height·3`): per Gaussian `[d mean (2), d conic (3), d opacity,
-/// d colour (3)]`, the quantities [`super::raster::backward`] returns. Each tile writes a
+/// d colour (3)]`, the quantities `fit::raster::backward` returns. Each tile writes a
 /// slot per list entry and the slots are summed in tile order, as on the CPU: no atomics,
 /// the same sums on every run.
 pub fn backward(

@@ -4,7 +4,7 @@
 //! again and again (what a viewer, or a frame-rate measurement, does).
 //!
 //! Kernels: `fit_range` (quantization-aware steps only), `fit_project`, `fit_scan`,
-//! `fit_emit`, the radix sort ([`super::sort`]), `fit_tiles`, then `render`.
+//! `fit_emit`, the radix sort (`gpu::sort`), `fit_tiles`, then `render`.
 
 // Without the stages (feature `encode`) only `GpuScene` draws with this half; the
 // buffers and helpers the resident fit adds to it go unused.

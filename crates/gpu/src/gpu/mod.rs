@@ -119,7 +119,7 @@ fn spec_exp() -> String {
     )
 }
 
-/// [`contract`], the indexing helpers of `shaders/device/grid.wgsl`, then `parts`.
+/// `contract`, the indexing helpers of `shaders/device/grid.wgsl`, then `parts`.
 pub fn with_contract(parts: &[&str]) -> String {
     let mut source = contract();
     source.push_str(include_str!("../../../../shaders/device/grid.wgsl"));
