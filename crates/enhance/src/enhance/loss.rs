@@ -49,6 +49,7 @@
 //!   root is guarded by an epsilon, and values beyond the `f32` range saturate at
 //!   `±f32::MAX`.
 
+use gsi_metrics::metrics::sobel_row;
 use std::fmt;
 
 /// Below this mean luma the low image counts as black, and the spatial term compares
@@ -321,7 +322,7 @@ impl ImageLoss {
             .enumerate()
         {
             let [up, mid, dn] = neighbours(y, height).map(|r| &low[r * row..(r + 1) * row]);
-            sobel_row(up, mid, dn, gx, gy);
+            sobel_row::<3>(up, mid, dn, gx, gy);
         }
 
         let n = (width * height) as f64;
@@ -500,7 +501,7 @@ impl ImageLoss {
                 ss[3] += rg * rg;
                 ss[4] += yb * yb;
             }
-            sobel_row(up, mid, dn, &mut gx, &mut gy);
+            sobel_row::<3>(up, mid, dn, &mut gx, &mut gy);
             let low_gx = &self.low_gx[y * row..(y + 1) * row];
             let low_gy = &self.low_gy[y * row..(y + 1) * row];
             for (r, l) in ref_x
@@ -755,49 +756,6 @@ fn channel_sums(img: &[f32]) -> [f64; 3] {
 #[inline]
 fn neighbours(i: usize, n: usize) -> [usize; 3] {
     [i.saturating_sub(1), i, (i + 1).min(n - 1)]
-}
-
-/// Sobel responses of one image row (`3 · width` floats, interleaved RGB), given the
-/// rows above and below (edge rows replicated by the caller). A correlation with
-/// `Gx = [[-1,0,1],[-2,0,2],[-1,0,1]]` and `Gy = Gxᵀ`, edge columns replicated.
-///
-/// Computed in `f32` so that it vectorizes; `I_low` and `I_e` go through this same code,
-/// so `I_e = I_low` gives equal responses.
-fn sobel_row(up: &[f32], mid: &[f32], dn: &[f32], gx: &mut [f32], gy: &mut [f32]) {
-    let n = mid.len();
-    // Edge pixels: the missing neighbour is the pixel itself (3 floats = 1 pixel).
-    for j in (0..3).chain(n.saturating_sub(3).max(3)..n) {
-        let jm = if j >= 3 { j - 3 } else { j };
-        let jp = if j + 3 < n { j + 3 } else { j };
-        (gx[j], gy[j]) = sobel_taps(
-            [up[jm], up[j], up[jp]],
-            [mid[jm], mid[jp]],
-            [dn[jm], dn[j], dn[jp]],
-        );
-    }
-    if n <= 6 {
-        return;
-    }
-    let m = n - 6;
-    let (ul, u0, ur) = (&up[..m], &up[3..3 + m], &up[6..6 + m]);
-    let (ml, mr) = (&mid[..m], &mid[6..6 + m]);
-    let (dl, d0, dr) = (&dn[..m], &dn[3..3 + m], &dn[6..6 + m]);
-    let (gx, gy) = (&mut gx[3..3 + m], &mut gy[3..3 + m]);
-    for k in 0..m {
-        (gx[k], gy[k]) = sobel_taps([ul[k], u0[k], ur[k]], [ml[k], mr[k]], [dl[k], d0[k], dr[k]]);
-    }
-}
-
-/// `(Gx, Gy)` from the row above (left, centre, right), the row itself (left, right)
-/// and the row below. Saturated at `±f32::MAX`, so huge inputs stay finite.
-#[inline(always)]
-fn sobel_taps(u: [f32; 3], m: [f32; 2], d: [f32; 3]) -> (f32, f32) {
-    let gx = (u[2] - u[0]) + 2.0 * (m[1] - m[0]) + (d[2] - d[0]);
-    let gy = (d[0] + 2.0 * d[1] + d[2]) - (u[0] + 2.0 * u[1] + u[2]);
-    // Not `clamp`: that keeps NaN (∞ − ∞ from two huge inputs), `max` replaces it.
-    #[allow(clippy::manual_clamp)]
-    let finite = |v: f32| v.max(-f32::MAX).min(f32::MAX);
-    (finite(gx), finite(gy))
 }
 
 /// `Σ |a_i − b_i|`, in `f64`, with four partial sums so the loop vectorizes.

@@ -33,21 +33,16 @@ fn luminance(t: &Target) -> Vec<f32> {
         .collect()
 }
 
-/// Sobel gradients `(gx, gy)` of `l` with replicated borders.
+/// Sobel gradients `(gx, gy)` of `l` with replicated borders, a row at a time through
+/// the filter stage 2 uses too ([`gsi_metrics::metrics::sobel_row`]).
 fn sobel(l: &[f32], w: usize, h: usize) -> (Vec<f32>, Vec<f32>) {
-    let at = |x: isize, y: isize| {
-        l[(y.clamp(0, h as isize - 1) as usize) * w + x.clamp(0, w as isize - 1) as usize]
-    };
     let mut gx = vec![0f32; w * h];
     let mut gy = vec![0f32; w * h];
-    for y in 0..h as isize {
-        for x in 0..w as isize {
-            let i = y as usize * w + x as usize;
-            gx[i] = (at(x + 1, y - 1) + 2.0 * at(x + 1, y) + at(x + 1, y + 1))
-                - (at(x - 1, y - 1) + 2.0 * at(x - 1, y) + at(x - 1, y + 1));
-            gy[i] = (at(x - 1, y + 1) + 2.0 * at(x, y + 1) + at(x + 1, y + 1))
-                - (at(x - 1, y - 1) + 2.0 * at(x, y - 1) + at(x + 1, y - 1));
-        }
+    let row = |y: usize| &l[y * w..(y + 1) * w];
+    for y in 0..h {
+        let (up, dn) = (row(y.saturating_sub(1)), row((y + 1).min(h - 1)));
+        let out = y * w..(y + 1) * w;
+        gsi_metrics::metrics::sobel_row::<1>(up, row(y), dn, &mut gx[out.clone()], &mut gy[out]);
     }
     (gx, gy)
 }

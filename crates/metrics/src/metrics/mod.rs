@@ -31,6 +31,7 @@ mod filter;
 mod loss;
 mod niqe;
 mod psnr;
+mod sobel;
 mod ssim;
 
 pub use color::{color_cast, linear_to_srgb, mean_ab, srgb_to_linear, BT601, BT601_F32};
@@ -42,6 +43,7 @@ pub use filter::Real;
 pub use loss::{ms_ssim_loss_grad, ssim_loss_grad, LossWorkspace};
 pub use niqe::{niqe, NIQE_PATCH};
 pub use psnr::{psnr, psnr_of_sse};
+pub use sobel::{sobel_row, sobel_taps};
 pub use ssim::{ms_ssim, ssim, MS_SSIM_WEIGHTS};
 
 use std::fmt;
