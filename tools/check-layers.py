@@ -171,7 +171,7 @@ def layers(edges):
     """Modules grouped by height: a module's layer is one above its highest import."""
     height = {}
 
-    def h(n, seen=()):
+    def h(n):
         if n not in height:
             height[n] = 1 + max((h(m) for m in edges.get(n, {}) if m in edges), default=-1)
         return height[n]

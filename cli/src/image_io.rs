@@ -17,32 +17,24 @@ const READS: &str = "PNG, JPEG, BMP, TIFF, WebP or PNM";
 /// bounded by the `image` crate's default limits (512 MiB per allocation).
 pub fn open(path: &Path) -> Result<DynamicImage, Failure> {
     let named = |e: &dyn std::fmt::Display| Failure(format!("{}: {e}", path.display()));
-    let mut stdin = None;
-    let reader = if path == Path::new("-") {
-        let mut bytes = Vec::new();
-        io::open_input(path)
-            .and_then(|mut r| r.read_to_end(&mut bytes))
-            .map_err(|e| named(&e))?;
-        stdin = Some(bytes.clone());
-        ImageReader::new(Box::new(Cursor::new(bytes)) as Box<dyn ReadSeek>)
-    } else {
-        let file = std::fs::File::open(path).map_err(|e| named(&e))?;
-        ImageReader::new(Box::new(std::io::BufReader::new(file)) as Box<dyn ReadSeek>)
-    };
-    let reader = reader.with_guessed_format().map_err(|e| named(&e))?;
+    // Read once, whole: the JPEG check below needs every byte, and the decoders that
+    // seek (TIFF) need a seekable source, which standard input is not.
+    let mut bytes = Vec::new();
+    io::open_input(path)
+        .and_then(|mut r| r.read_to_end(&mut bytes))
+        .map_err(|e| named(&e))?;
+    let reader = ImageReader::new(Cursor::new(&bytes[..]))
+        .with_guessed_format()
+        .map_err(|e| named(&e))?;
     if reader.format().is_none() {
         return Err(named(&format_args!("not an image gsi reads ({READS})")));
     }
     // The JPEG decoder fills a stream cut short with grey and says nothing; a damaged
     // photograph is refused here instead of being fitted, missing half, without a word.
-    if reader.format() == Some(image::ImageFormat::Jpeg) {
-        let bytes = match &stdin {
-            Some(b) => b.clone(),
-            None => std::fs::read(path).map_err(|e| named(&e))?,
-        };
-        if !jpeg_reaches_its_end(&bytes) {
-            return Err(named(&"the JPEG data ends before its end-of-image marker: the file is truncated or damaged"));
-        }
+    if reader.format() == Some(image::ImageFormat::Jpeg) && !jpeg_reaches_its_end(&bytes) {
+        return Err(named(
+            &"the JPEG data ends before its end-of-image marker: the file is truncated or damaged",
+        ));
     }
     let described = |e: image::ImageError| match e {
         image::ImageError::Unsupported(u) => named(&format_args!("{u} (gsi reads {READS})")),
@@ -144,10 +136,6 @@ mod tests {
         assert!(!jpeg_reaches_its_end(&[]));
     }
 }
-
-/// A seekable reader, for the decoders that need to seek (TIFF).
-trait ReadSeek: std::io::BufRead + std::io::Seek {}
-impl<T: std::io::BufRead + std::io::Seek> ReadSeek for T {}
 
 /// What `gsi decode` writes, chosen by the output's extension.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -103,10 +103,7 @@ fn target(samples: &[u8], bits: u8, width: u32, height: u32) -> Result<fit::Targ
             fit::Target::from_rgb16(width, height, &v).ok_or_else(bad)
         }
         32 => {
-            let data: Vec<f32> = samples
-                .chunks_exact(4)
-                .map(|c| f32::from_ne_bytes([c[0], c[1], c[2], c[3]]))
-                .collect();
+            let data: Vec<f32> = f32s(samples).collect();
             if let Some(x) = data.iter().find(|x| !(0.0..=1.0).contains(*x)) {
                 return Err(format!("float samples must lie in [0, 1]; found {x}"));
             }
@@ -125,11 +122,10 @@ fn target(samples: &[u8], bits: u8, width: u32, height: u32) -> Result<fit::Targ
 }
 
 fn blend_named(name: &str) -> Result<Blend, String> {
-    match name {
-        "sum" => Ok(Blend::Sum),
-        "alpha" => Ok(Blend::Alpha),
-        other => Err(format!("blend {other:?}: expected \"sum\" or \"alpha\"")),
-    }
+    [Blend::Sum, Blend::Alpha]
+        .into_iter()
+        .find(|b| b.name() == name)
+        .ok_or_else(|| format!("blend {name:?}: expected \"sum\" or \"alpha\""))
 }
 
 fn cov_param_named(name: &str) -> Result<CovParam, String> {
@@ -365,13 +361,16 @@ fn info(py: Python<'_>, data: &[u8]) -> PyResult<String> {
     .map_err(fail)
 }
 
+/// Values as Python bytes, native byte order.
+fn ne_bytes<'py, const N: usize>(
+    py: Python<'py>,
+    values: impl Iterator<Item = [u8; N]>,
+) -> Bound<'py, PyBytes> {
+    PyBytes::new(py, &values.flatten().collect::<Vec<u8>>())
+}
+
 fn f32_bytes<'py, const K: usize>(py: Python<'py>, rows: &[[f32; K]]) -> Bound<'py, PyBytes> {
-    let flat: Vec<u8> = rows
-        .iter()
-        .flatten()
-        .flat_map(|x| x.to_ne_bytes())
-        .collect();
-    PyBytes::new(py, &flat)
+    ne_bytes(py, rows.iter().flatten().map(|x| x.to_ne_bytes()))
 }
 
 /// The Gaussians of a file as the renderer sees them: a dict of sizes, names and
@@ -399,16 +398,15 @@ fn read<'py>(py: Python<'py>, data: &[u8]) -> PyResult<Bound<'py, PyDict>> {
     d.set_item("colors", f32_bytes(py, &g.colors))?;
     d.set_item(
         "opacity",
-        g.opacity.as_ref().map(|o| {
-            let flat: Vec<u8> = o.iter().flat_map(|x| x.to_ne_bytes()).collect();
-            PyBytes::new(py, &flat)
-        }),
+        g.opacity
+            .as_ref()
+            .map(|o| ne_bytes(py, o.iter().map(|x| x.to_ne_bytes()))),
     )?;
     d.set_item(
         "tone",
         scene.tone.as_ref().map(|t| {
-            let flat: Vec<u8> = t.values().iter().flat_map(|x| x.to_ne_bytes()).collect();
-            (t.curves(), PyBytes::new(py, &flat))
+            let values = ne_bytes(py, t.values().iter().map(|x| x.to_ne_bytes()));
+            (t.curves(), values)
         }),
     )?;
     Ok(d)

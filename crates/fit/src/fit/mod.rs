@@ -559,35 +559,30 @@ impl<'a> Fitter<'a> {
         measure: bool,
     ) -> (f32, Option<f64>, Vec<raster::ProjGrad>) {
         let (w, h) = (self.target.width, self.target.height);
-        let (target, loss) = (self.target, &mut self.loss);
+        let (target, blend) = (self.target, self.blend);
+        let fused = blend == Blend::Sum && self.loss.kind() == Loss::L2;
+        let loss = &mut self.loss;
+        // The loss of an image and its gradient, and its PSNR when `measure`.
         let mut score = |image: &[f32]| {
             let (value, dl) = loss.eval(image, &target.data, w, h);
             let psnr = measure.then(|| loss::psnr8(image, &target.data, w, h));
             (value, dl, psnr)
         };
-        if let Some(done) = self.twin.passes(projected, self.blend, (w, h), &mut score) {
+        if let Some(done) = self.twin.passes(projected, blend, (w, h), &mut score) {
             return done;
         }
-        if self.blend == Blend::Sum && self.loss.kind() == Loss::L2 {
-            let step = raster::step_l2_sum(projected, &self.target.data, w, h, measure);
-            let psnr = measure.then(|| loss::psnr8(&step.image, &self.target.data, w, h));
+        if fused {
+            let step = raster::step_l2_sum(projected, &target.data, w, h, measure);
+            let psnr = measure.then(|| loss::psnr8(&step.image, &target.data, w, h));
             return (step.loss, psnr, step.grads);
         }
-        let fwd = raster::forward(projected, self.blend, w, h);
-        let (value, dl, psnr) = self.score(&fwd.image, measure);
+        let fwd = raster::forward(projected, blend, w, h);
+        let (value, dl, psnr) = score(&fwd.image);
         (
             value,
             psnr,
             raster::backward(&fwd, projected, &dl, Need::All),
         )
-    }
-
-    /// The loss of `image` and its gradient, and its PSNR when `measure`.
-    fn score(&mut self, image: &[f32], measure: bool) -> (f32, Vec<f32>, Option<f64>) {
-        let (w, h) = (self.target.width, self.target.height);
-        let (value, dl) = self.loss.eval(image, &self.target.data, w, h);
-        let psnr = measure.then(|| loss::psnr8(image, &self.target.data, w, h));
-        (value, dl, psnr)
     }
 
     /// Total colour each Gaussian puts into the image, `Σ_p alpha_i T_i · max|c_i|`
