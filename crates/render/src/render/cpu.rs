@@ -7,7 +7,7 @@
 //! Gaussian's box. Which thread renders a band never changes the arithmetic, so the
 //! parallel and sequential builds give identical bits.
 
-use super::lanes::{Acc, Kernel};
+use super::lanes::{band_tiles, Acc, Kernel};
 use super::project::{Projected, Rect};
 use super::tiles::{runs, Bins, Span};
 use super::TILE;
@@ -45,9 +45,9 @@ impl Output for RgbF32 {
     }
 }
 
-/// Blend a band of `pixels` pixels into `scratch` and hand it to `store`.
+/// Blend a band of `pixels` pixels into `scratch` and hand it to `store`. (`draw` zeroes
+/// what it blends into, so the scratch is only sized here, not cleared.)
 fn via_scratch(scratch: &mut Vec<f32>, pixels: usize, draw: impl FnOnce(&mut [f32])) -> &[f32] {
-    scratch.clear();
     scratch.resize(pixels * 3, 0.0);
     draw(scratch);
     scratch
@@ -195,10 +195,15 @@ impl Band<'_> {
         let row_len = self.width as usize * 3;
         let y1 = self.y0 + (rows.len() / row_len) as u32;
         let tiles_x = self.width.div_ceil(TILE);
-        let spans = list.iter().map(|&k| -> Span {
-            let b = &self.proj[k as usize].bbox;
-            (k, b.x0 / TILE, b.x1 / TILE)
-        });
+        let spans: Vec<Span> = list
+            .iter()
+            .filter_map(|&k| {
+                let (lo, hi) =
+                    band_tiles(&self.proj[k as usize], self.cuts[k as usize], self.y0..y1)?;
+                Some((k, lo, hi))
+            })
+            .collect();
+        let spans = spans.iter().copied();
         let mut acc = Acc::zero();
         for run in runs(spans.clone(), tiles_x, self.tile_budget) {
             tiles.fill(spans.clone(), run.clone());
@@ -314,6 +319,46 @@ mod tests {
                         );
                     }
                 }
+            }
+        }
+    }
+
+    /// Every pixel the rule touches lies in a tile that `band_tiles` keeps for its band,
+    /// and the culling does cull: needle-thin rotated Gaussians, low opacities, sizes
+    /// that scale the footprints up and down.
+    #[test]
+    fn band_culling_keeps_every_touched_tile() {
+        use super::super::lanes::band_tiles;
+        for (seed, cov_param, with_opacity) in [
+            (3, CovParam::LogScaleRotation, true),
+            (4, CovParam::Cholesky, false),
+        ] {
+            let mut spec = SceneSpec::new(96, 80, 300, Blend::Sum);
+            spec.sigma_px = (0.1, 60.0);
+            spec.cov_param = cov_param;
+            spec.with_opacity = with_opacity;
+            let scene = random_scene(seed, spec);
+            for (w, h) in [(96, 80), (250, 41), (17, 130)] {
+                let (mut kept, mut boxed) = (0u32, 0u32);
+                for g in &project_scene(&scene, w, h) {
+                    for band in 0..h.div_ceil(TILE) {
+                        let rows = band * TILE..((band + 1) * TILE).min(h);
+                        let tiles = band_tiles(g, g.cutoff(), rows.clone());
+                        if g.bbox.y0 < rows.end && rows.start <= g.bbox.y1 {
+                            boxed += g.bbox.x1 / TILE - g.bbox.x0 / TILE + 1;
+                            kept += tiles.map_or(0, |(lo, hi)| hi - lo + 1);
+                        }
+                        for j in rows {
+                            for i in 0..w {
+                                if g.alpha_at(i, j, Blend::Sum).is_some() {
+                                    let (lo, hi) = tiles.expect("band of a touched pixel");
+                                    assert!((lo..=hi).contains(&(i / TILE)), "{g:?} {i} {j}");
+                                }
+                            }
+                        }
+                    }
+                }
+                assert!(kept < boxed, "{cov_param:?} {w}x{h}: {kept} of {boxed}");
             }
         }
     }
