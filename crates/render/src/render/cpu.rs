@@ -2,9 +2,9 @@
 //!
 //! Work is split into bands of [`TILE`] pixel rows. Each band owns a contiguous slice of
 //! the output, so bands can be rendered on different threads without sharing or
-//! `unsafe`. Inside a band, Gaussians are binned per 16×16 tile; a tile visits its list
-//! in stored order and evaluates only the pixels inside both the tile and the
-//! Gaussian's box. Which thread renders a band never changes the arithmetic, so the
+//! `unsafe`. Inside a band, a Gaussian is binned to the 16×16 tiles that its ellipse
+//! reaches over the band's rows ([`band_tiles`]); a tile visits its list in stored order
+//! and evaluates only the pixels inside both the tile and the Gaussian's box. Which thread renders a band never changes the arithmetic, so the
 //! parallel and sequential builds give identical bits.
 
 use super::lanes::{band_tiles, Acc, Kernel};

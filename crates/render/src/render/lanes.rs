@@ -180,13 +180,14 @@ fn reach(cut: f32, s: f64) -> f64 {
 }
 
 /// The tiles `(lo, hi)` (inclusive tile columns) of a band of pixel rows `rows` where `g`
-/// may reach its cut-off `cut`: those that the ellipse `Q ≤` [`reach`] meets within the
-/// rows of the box in the band, widened by a pixel each way. `None` where it meets none.
+/// may reach its cut-off `cut`: those that the ellipse `Q = −2·power ≤ t` meets within
+/// the rows of the box in the band (`t` the cut-off with the margin for rounding),
+/// widened by a pixel each way. `None` where it meets none.
 ///
 /// A rotated, elongated Gaussian's box holds whole tiles that the ellipse never
 /// reaches; deciding that once per band, in closed form, costs less than a test per tile
-/// ([`Footprint::of`]) and keeps those tiles' lists shorter. Only a shortcut: every pixel
-/// of a kept tile is evaluated by the rule.
+/// (the fit's `Footprint::of`) and keeps those tiles' lists shorter. Only a shortcut:
+/// every pixel of a kept tile is evaluated by the rule.
 pub fn band_tiles(g: &Projected, cut: f32, rows: Range<u32>) -> Option<(u32, u32)> {
     let b = &g.bbox;
     let ys = b.y0.max(rows.start)..(b.y1 + 1).min(rows.end);
