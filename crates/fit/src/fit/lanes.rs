@@ -1,7 +1,7 @@
 //! The `sum` rasterizer's inner loops for fitting, eight pixels of a tile row at a time.
 //!
 //! They walk tiles as the decoder's loops do ([`gsi_render::render::lanes`]: the same
-//! [`Footprint`] culling and masks, the same polynomial `exp` of spec §6.3), and add the
+//! [`Footprint`] and masks, the same polynomial `exp` of spec §6.3), and add the
 //! fit's own needs: the alphas a forward pass keeps for its backward pass ([`forward_tile`]'s
 //! `kept`, used by [`super::raster::step_l2_sum`]), and the backward pass itself.
 //!

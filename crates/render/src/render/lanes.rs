@@ -20,13 +20,12 @@
 //! The encoder's loops (`gsi_fit::fit`) share [`Footprint`] and the polynomial; they
 //! may fuse multiply-adds (`F`), since a fit needs the decoder's values, not its bits.
 
-use super::project::{Projected, Rect};
+use super::project::{offset, Projected, Rect};
 use super::TILE;
 use gsi_format::contract::exp_in_range;
 pub use gsi_format::contract::mla;
 use gsi_format::contract::{ALPHA_MAX, ALPHA_MIN, TRANSMITTANCE_MIN};
 use gsi_format::model::Blend;
-use std::ops::Range;
 
 /// Pixels per chunk: one AVX register of `f32`, two SSE or NEON ones.
 pub const LANES: usize = 8;
@@ -49,25 +48,10 @@ pub struct Footprint<'g> {
 }
 
 impl Footprint<'_> {
-    /// `None` where the box misses the tile, or where no pixel centre of the tile's part of
-    /// the box can reach the cut-off `cut`: the box is square to the axes, and a rotated,
-    /// elongated Gaussian leaves whole tiles of it untouched. Only a shortcut: a
-    /// Gaussian it keeps is evaluated per pixel by the rule.
-    #[cfg(feature = "encode")]
+    /// The part of `g`'s box in tile `rect`; `None` where they do not meet. (Which tiles
+    /// a Gaussian can reach at all was decided when it was binned, [`super::tiles::band_tiles`].)
     #[inline]
     pub fn of<'g>(g: &'g Projected, cut: f32, rect: Rect) -> Option<Footprint<'g>> {
-        let (xs, ys) = g.bbox.clip(rect)?;
-        let (least, s) = q_min(g.conic, offsets(g, &xs, &ys));
-        if least > reach(cut, s) {
-            return None;
-        }
-        Footprint::clip(g, cut, rect)
-    }
-
-    /// The box's part in tile `rect`, without [`Footprint::of`]'s test: for tiles that
-    /// [`band_tiles`] already chose.
-    #[inline]
-    pub fn clip<'g>(g: &'g Projected, cut: f32, rect: Rect) -> Option<Footprint<'g>> {
         let (xs, ys) = g.bbox.clip(rect)?;
         Some(Footprint {
             g,
@@ -159,122 +143,6 @@ impl Footprint<'_> {
         let first = self.x0 + (c * LANES) as u32;
         std::array::from_fn(|l| offset(first.wrapping_add(l as u32), self.g.mean[0]))
     }
-}
-
-/// The offsets of the first and last pixel centres of columns `xs` and rows `ys` from
-/// the centre of `g`, as the pixels compute them; rounding is monotonic, so every
-/// pixel's offset lies between them.
-fn offsets(g: &Projected, xs: &Range<u32>, ys: &Range<u32>) -> [[f32; 2]; 2] {
-    [
-        [offset(xs.start, g.mean[0]), offset(xs.end - 1, g.mean[0])],
-        [offset(ys.start, g.mean[1]), offset(ys.end - 1, g.mean[1])],
-    ]
-}
-
-/// The largest `Q = -2·power` (exactly) at which a pixel may still reach the cut-off
-/// `cut`, where `s` bounds the magnitude of `Q`'s terms: a pixel's binary32 `power` is
-/// off by less than 1e-6·s, so a margin of 1e-5·s + 1e-3 leaves out no pixel that
-/// reaches the cut.
-fn reach(cut: f32, s: f64) -> f64 {
-    -2.0 * f64::from(cut) + 1e-3 + 1e-5 * s
-}
-
-/// The tiles `(lo, hi)` (inclusive tile columns) of a band of pixel rows `rows` where `g`
-/// may reach its cut-off `cut`: those that the ellipse `Q = −2·power ≤ t` meets within
-/// the rows of the box in the band (`t` the cut-off with the margin for rounding),
-/// widened by a pixel each way. `None` where it meets none.
-///
-/// A rotated, elongated Gaussian's box holds whole tiles that the ellipse never
-/// reaches; deciding that once per band, in closed form, costs less than a test per tile
-/// (the fit's `Footprint::of`) and keeps those tiles' lists shorter. Only a shortcut:
-/// every pixel of a kept tile is evaluated by the rule.
-pub fn band_tiles(g: &Projected, cut: f32, rows: Range<u32>) -> Option<(u32, u32)> {
-    let b = &g.bbox;
-    let ys = b.y0.max(rows.start)..(b.y1 + 1).min(rows.end);
-    if ys.is_empty() {
-        return None;
-    }
-    let whole = Some((b.x0 / TILE, b.x1 / TILE));
-    let [dxs, dys] = offsets(g, &(b.x0..b.x1 + 1), &ys).map(|r| r.map(f64::from));
-    let [a, bb, c] = g.conic.map(f64::from);
-    let (mx, my) = (
-        dxs[0].abs().max(dxs[1].abs()),
-        dys[0].abs().max(dys[1].abs()),
-    );
-    let t = reach(
-        cut,
-        a.abs() * mx * mx + c.abs() * my * my + 2.0 * bb.abs() * mx * my,
-    );
-    let det = a * c - bb * bb;
-    if !(det > 0.0 && a > 0.0 && c > 0.0 && t.is_finite()) {
-        return whole;
-    }
-    // The ellipse `Q ≤ t` spans rows `|y| ≤ ymax`; at row `y` its columns run from
-    // `(−B·y − w)/A` to `(−B·y + w)/A`, `w = sqrt(A·t − det·y²)`. Its right end is
-    // concave in `y`, greatest at `y = −B·x/C` with `x = sqrt(t·C/det)` (where
-    // `∂Q/∂y = 0`); the left end mirrors it. Over the band's rows each is at its
-    // extreme row clamped into them.
-    let ymax = (a * t / det).sqrt();
-    let (lo, hi) = (dys[0].max(-ymax), dys[1].min(ymax));
-    if lo > hi {
-        return None;
-    }
-    let ends = |y: f64| {
-        let w = (a * t - det * y * y).max(0.0).sqrt();
-        ((-bb * y - w) / a, (-bb * y + w) / a)
-    };
-    let ytop = -bb * (t * c / det).sqrt() / c;
-    let right = ends(ytop.clamp(lo, hi)).1;
-    let left = ends((-ytop).clamp(lo, hi)).0;
-    // Pixel `i` has its centre at offset `i + 0.5 − mx`; a pixel of slack each way covers
-    // the rounding of the offsets the pixels compute. (`max` and `min` take a NaN to the
-    // box's edge.)
-    let first = (f64::from(g.mean[0]) + left - 1.5)
-        .floor()
-        .max(f64::from(b.x0));
-    let last = (f64::from(g.mean[0]) + right + 0.5)
-        .ceil()
-        .min(f64::from(b.x1));
-    if first > last {
-        return None;
-    }
-    Some((first as u32 / TILE, last as u32 / TILE))
-}
-
-/// `(i + 0.5) − m` for pixel column or row `i`, as spec §6.3 computes it.
-#[inline(always)]
-fn offset(i: u32, m: f32) -> f32 {
-    (i as f32 + 0.5) - m
-}
-
-/// The least value of `Q = A dx² + 2B dx dy + C dy²` (`-2·power`, a positive definite
-/// form) over the rectangle `dx ∈ [dxs[0], dxs[1]]`, `dy ∈ [dys[0], dys[1]]`, in `f64`:
-/// 0 when it holds the centre, else on an edge, where `Q` is a parabola minimized in
-/// closed form. Also the largest magnitude of the terms of `Q` over the rectangle, which
-/// bounds the rounding of a binary32 evaluation.
-#[cfg(feature = "encode")]
-fn q_min([a, b, c]: [f32; 3], [dxs, dys]: [[f32; 2]; 2]) -> (f64, f64) {
-    let (a, b, c) = (f64::from(a), f64::from(b), f64::from(c));
-    let dxs = dxs.map(f64::from);
-    let dys = dys.map(f64::from);
-    let big = |r: [f64; 2]| r[0].abs().max(r[1].abs());
-    let (mx, my) = (big(dxs), big(dys));
-    let s = a.abs() * mx * mx + c.abs() * my * my + 2.0 * b.abs() * mx * my;
-    let holds = |r: [f64; 2]| r[0] <= 0.0 && 0.0 <= r[1];
-    if holds(dxs) && holds(dys) {
-        return (0.0, s);
-    }
-    let q = |x: f64, y: f64| a * x * x + 2.0 * b * x * y + c * y * y;
-    let mut least = f64::INFINITY;
-    for x in dxs {
-        let y = (-b * x / c).clamp(dys[0], dys[1]);
-        least = least.min(q(x, y));
-    }
-    for y in dys {
-        let x = (-b * y / a).clamp(dxs[0], dxs[1]);
-        least = least.min(q(x, y));
-    }
-    (least, s)
 }
 
 /// Which build of the loops runs: the portable one, or one for a CPU feature detected at
@@ -389,7 +257,7 @@ fn tile_sum<const JOIN: bool>(
 ) {
     for &k in list {
         let g = &proj[k as usize];
-        let Some(f) = Footprint::clip(g, cuts[k as usize], rect) else {
+        let Some(f) = Footprint::of(g, cuts[k as usize], rect) else {
             continue;
         };
         for start in f.starts() {
@@ -424,7 +292,7 @@ fn tile_alpha<const JOIN: bool>(
     let mut live = ((rect.x1 - rect.x0) * (rect.y1 - rect.y0)) as usize;
     for &k in list {
         let g = &proj[k as usize];
-        let Some(f) = Footprint::clip(g, cuts[k as usize], rect) else {
+        let Some(f) = Footprint::of(g, cuts[k as usize], rect) else {
             continue;
         };
         for start in f.starts() {

@@ -63,6 +63,12 @@ impl PixelBox {
     }
 }
 
+/// `(i + 0.5) − m` for pixel column or row `i`, as spec §6.3 computes it.
+#[inline(always)]
+pub(crate) fn offset(i: u32, m: f32) -> f32 {
+    (i as f32 + 0.5) - m
+}
+
 /// One Gaussian in the pixel space of a given output size, ready to be evaluated.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Projected {
