@@ -81,6 +81,11 @@ pub fn band_tiles(g: &Projected, cut: f32, rows: Range<u32>) -> Option<(u32, u32
         return None;
     }
     let whole = Some((b.x0 / TILE, b.x1 / TILE));
+    if b.x1 / TILE - b.x0 / TILE < 2 {
+        // A box within two tile columns: the ellipse reaches both nearly always, and the
+        // test would cost more than the tile it rarely saves.
+        return whole;
+    }
     // The offsets of the box's first and last pixel centres (columns) and of the band's
     // rows in the box, as the pixels compute them; rounding is monotonic, so every
     // pixel's offset lies between them.
@@ -241,17 +246,35 @@ impl TileLists {
         };
         let slots = tiles_x as usize * rows.len();
         // Each Gaussian's tiles, tile row by tile row: the tile columns its ellipse
-        // reaches there ([`band_tiles`]), decided once (the binner walks them twice).
-        let mut reached = Vec::new();
-        for (k, g) in projected.iter().enumerate() {
-            let b = g.bbox;
-            let cut = g.cutoff();
-            for ty in (b.y0 / TILE).max(rows.start)..(b.y1 / TILE + 1).min(rows.end) {
-                if let Some((lo, hi)) = band_tiles(g, cut, ty * TILE..(ty + 1) * TILE) {
-                    reached.push((k as u32, ty - rows.start, lo, hi.min(tiles_x - 1)));
+        // reaches there ([`band_tiles`]), decided once (the binner walks them twice),
+        // in chunks of Gaussians on rayon's pool where there is one: this is the serial
+        // part of a fitting pass.
+        let reach = |first: usize, chunk: &[Projected]| {
+            let mut out = Vec::new();
+            for (k, g) in (first..).zip(chunk) {
+                let b = g.bbox;
+                let cut = g.cutoff();
+                for ty in (b.y0 / TILE).max(rows.start)..(b.y1 / TILE + 1).min(rows.end) {
+                    if let Some((lo, hi)) = band_tiles(g, cut, ty * TILE..(ty + 1) * TILE) {
+                        out.push((k as u32, ty - rows.start, lo, hi.min(tiles_x - 1)));
+                    }
                 }
             }
-        }
+            out
+        };
+        const CHUNK: usize = 1024;
+        #[cfg(feature = "parallel")]
+        let reached: Vec<_> = {
+            use rayon::prelude::*;
+            let parts: Vec<Vec<_>> = projected
+                .par_chunks(CHUNK)
+                .enumerate()
+                .map(|(c, chunk)| reach(c * CHUNK, chunk))
+                .collect();
+            parts.concat()
+        };
+        #[cfg(not(feature = "parallel"))]
+        let reached = reach(0, projected);
         let covered = reached.iter().map(|&(k, ty, lo, hi)| {
             let tiles = (lo..=hi).map(move |tx| (ty * tiles_x + tx) as usize);
             (k, tiles)
@@ -346,7 +369,7 @@ mod tests {
             spec.cov_param = cov_param;
             spec.with_opacity = with_opacity;
             let scene = random_scene(seed, spec);
-            for (w, h) in [(96, 80), (250, 41), (17, 130)] {
+            for (w, h) in [(96, 80), (250, 41), (50, 130)] {
                 let (mut kept, mut boxed) = (0u32, 0u32);
                 for g in &super::super::project_scene(&scene, w, h) {
                     for band in 0..h.div_ceil(TILE) {
