@@ -72,8 +72,8 @@ fn reach(cut: f32, s: f64) -> f64 {
 ///
 /// A rotated, elongated Gaussian's box holds whole tiles that the ellipse never
 /// reaches; deciding that once per band, in closed form, costs less than a test per tile
-/// (which the binner did before) and keeps those tiles' lists shorter. Only a shortcut:
-/// every pixel of a kept tile is evaluated by the rule.
+/// in the tile loops, and keeps those tiles' lists shorter. Only a shortcut: every pixel
+/// of a kept tile is evaluated by the rule.
 pub fn band_tiles(g: &Projected, cut: f32, rows: Range<u32>) -> Option<(u32, u32)> {
     let b = &g.bbox;
     let ys = b.y0.max(rows.start)..(b.y1 + 1).min(rows.end);
