@@ -130,7 +130,7 @@ fn forward_generic<const KEEP: bool, const F: bool>(
 ) {
     for &k in list {
         let g = &proj[k as usize];
-        let Some(f) = Footprint::of(g, g.cutoff(), rect) else {
+        let Some(f) = Footprint::of(g, rect) else {
             continue;
         };
         for chunk in f.chunks() {
@@ -169,7 +169,7 @@ fn backward_generic<const ALL: bool, const KEPT: bool, const F: bool>(
     let mut kept = kept.chunks_exact(LANES);
     for (slot, &k) in out.iter_mut().zip(list) {
         let g = &proj[k as usize];
-        let Some(f) = Footprint::of(g, g.cutoff(), rect) else {
+        let Some(f) = Footprint::of(g, rect) else {
             continue;
         };
         let [ca, cb, cc] = g.conic;

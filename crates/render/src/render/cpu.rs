@@ -121,7 +121,6 @@ fn render_with<O: Output>(
         .enumerate()
         .map(|(k, p)| (k as u32, p.bbox.y0 / TILE, p.bbox.y1 / TILE));
 
-    let cuts: Vec<f32> = proj.iter().map(Projected::cutoff).collect();
     let mut bands = Bins::default();
     for run in runs(spans.clone(), band_count, band_budget) {
         bands.fill(spans.clone(), run.clone());
@@ -132,7 +131,6 @@ fn render_with<O: Output>(
             let band = run.start + k as u32;
             let ctx = Band {
                 proj,
-                cuts: &cuts,
                 blend,
                 kernel,
                 width,
@@ -174,8 +172,6 @@ struct Scratch {
 /// What every tile of one band needs to know.
 struct Band<'a> {
     proj: &'a [Projected],
-    /// [`Projected::cutoff`] of each Gaussian.
-    cuts: &'a [f32],
     blend: Blend,
     kernel: Kernel,
     width: u32,
@@ -198,8 +194,7 @@ impl Band<'_> {
         let spans: Vec<Span> = list
             .iter()
             .filter_map(|&k| {
-                let (lo, hi) =
-                    band_tiles(&self.proj[k as usize], self.cuts[k as usize], self.y0..y1)?;
+                let (lo, hi) = band_tiles(&self.proj[k as usize], self.y0..y1)?;
                 Some((k, lo, hi))
             })
             .collect();
@@ -221,7 +216,7 @@ impl Band<'_> {
                 };
                 acc.0.iter_mut().for_each(|p| p.fill(0.0));
                 self.kernel
-                    .tile(self.blend, tile, self.proj, self.cuts, rect, &mut acc);
+                    .tile(self.blend, tile, self.proj, rect, &mut acc);
                 acc.scatter(rows, self.width, rect);
             }
         }

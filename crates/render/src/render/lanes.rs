@@ -37,8 +37,6 @@ pub type V = [f32; LANES];
 /// One Gaussian over the part of a tile it touches.
 pub struct Footprint<'g> {
     pub g: &'g Projected,
-    /// [`Projected::cutoff`] of its opacity.
-    pub cut: f32,
     /// Tile-local columns `lx0..lx1` and pixel rows `ys` of its box in the tile.
     pub lx0: usize,
     pub lx1: usize,
@@ -51,11 +49,10 @@ impl Footprint<'_> {
     /// The part of `g`'s box in tile `rect`; `None` where they do not meet. (Which tiles
     /// a Gaussian can reach at all was decided when it was binned, [`super::tiles::band_tiles`].)
     #[inline]
-    pub fn of<'g>(g: &'g Projected, cut: f32, rect: Rect) -> Option<Footprint<'g>> {
+    pub fn of(g: &Projected, rect: Rect) -> Option<Footprint<'_>> {
         let (xs, ys) = g.bbox.clip(rect)?;
         Some(Footprint {
             g,
-            cut,
             lx0: (xs.start - rect.x0) as usize,
             lx1: (xs.end - rect.x0) as usize,
             ys,
@@ -101,6 +98,7 @@ impl Footprint<'_> {
         dy: f32,
     ) -> (V, V) {
         let g = self.g;
+        let cut = g.cutoff();
         let [ca, cb, cc] = g.conic;
         let cdy = cc * dy * dy;
         let first = self.x0 + start as u32;
@@ -121,11 +119,11 @@ impl Footprint<'_> {
             // NaN fails every test.
             let inside = (l as i32 >= lx0) & ((l as i32) < lx1);
             if JOIN {
-                let keep = inside & (power >= self.cut) & (power <= 0.0) & (a >= ALPHA_MIN);
+                let keep = inside & (power >= cut) & (power <= 0.0) & (a >= ALPHA_MIN);
                 alpha[l] = if keep { a } else { 0.0 };
             } else {
                 // One select per test, each a compare and a mask on a whole register.
-                a = if power >= self.cut { a } else { 0.0 };
+                a = if power >= cut { a } else { 0.0 };
                 a = if power <= 0.0 { a } else { 0.0 };
                 a = if a >= ALPHA_MIN { a } else { 0.0 };
                 alpha[l] = if inside { a } else { 0.0 };
@@ -192,28 +190,20 @@ impl Kernel {
         all
     }
 
-    /// Blend the Gaussians `list` (indices into `proj`, stored order; `cuts[k]` is
-    /// [`Projected::cutoff`] of `proj[k]`) over tile `rect` into `acc`, which holds zeros.
-    pub fn tile(
-        self,
-        blend: Blend,
-        list: &[u32],
-        proj: &[Projected],
-        cuts: &[f32],
-        rect: Rect,
-        acc: &mut Acc,
-    ) {
+    /// Blend the Gaussians `list` (indices into `proj`, stored order) over tile `rect`
+    /// into `acc`, which holds zeros.
+    pub fn tile(self, blend: Blend, list: &[u32], proj: &[Projected], rect: Rect, acc: &mut Acc) {
         match self {
             Kernel::Portable => match blend {
-                Blend::Sum => tile_sum::<false>(list, proj, cuts, rect, acc),
-                Blend::Alpha => tile_alpha::<false>(list, proj, cuts, rect, acc),
+                Blend::Sum => tile_sum::<false>(list, proj, rect, acc),
+                Blend::Alpha => tile_alpha::<false>(list, proj, rect, acc),
             },
             #[cfg(target_arch = "x86_64")]
             // SAFETY: `Avx2` and `Avx512` are only made where the CPU has the features
             // (`detect`).
-            Kernel::Avx2 => unsafe { x86::tile_avx2(blend, list, proj, cuts, rect, acc) },
+            Kernel::Avx2 => unsafe { x86::tile_avx2(blend, list, proj, rect, acc) },
             #[cfg(target_arch = "x86_64")]
-            Kernel::Avx512 => unsafe { x86::tile_avx512(blend, list, proj, cuts, rect, acc) },
+            Kernel::Avx512 => unsafe { x86::tile_avx512(blend, list, proj, rect, acc) },
         }
     }
 }
@@ -248,16 +238,10 @@ impl Acc {
 
 /// `sum` blending: `acc += c·alpha` for every Gaussian of the tile, in list order.
 #[inline(always)]
-fn tile_sum<const JOIN: bool>(
-    list: &[u32],
-    proj: &[Projected],
-    cuts: &[f32],
-    rect: Rect,
-    acc: &mut Acc,
-) {
+fn tile_sum<const JOIN: bool>(list: &[u32], proj: &[Projected], rect: Rect, acc: &mut Acc) {
     for &k in list {
         let g = &proj[k as usize];
-        let Some(f) = Footprint::of(g, cuts[k as usize], rect) else {
+        let Some(f) = Footprint::of(g, rect) else {
             continue;
         };
         for start in f.starts() {
@@ -281,18 +265,12 @@ fn tile_sum<const JOIN: bool>(
 /// `alpha` blending: front to back in list order, with per-pixel transmittance; the tile
 /// is done when no pixel of it takes light.
 #[inline(always)]
-fn tile_alpha<const JOIN: bool>(
-    list: &[u32],
-    proj: &[Projected],
-    cuts: &[f32],
-    rect: Rect,
-    acc: &mut Acc,
-) {
+fn tile_alpha<const JOIN: bool>(list: &[u32], proj: &[Projected], rect: Rect, acc: &mut Acc) {
     let mut trans = [1.0f32; ACC_W * TILE_W];
     let mut live = ((rect.x1 - rect.x0) * (rect.y1 - rect.y0)) as usize;
     for &k in list {
         let g = &proj[k as usize];
-        let Some(f) = Footprint::of(g, cuts[k as usize], rect) else {
+        let Some(f) = Footprint::of(g, rect) else {
             continue;
         };
         for start in f.starts() {
@@ -337,32 +315,18 @@ mod x86 {
     use super::*;
 
     #[target_feature(enable = "avx2")]
-    pub fn tile_avx2(
-        blend: Blend,
-        list: &[u32],
-        proj: &[Projected],
-        cuts: &[f32],
-        rect: Rect,
-        acc: &mut Acc,
-    ) {
+    pub fn tile_avx2(blend: Blend, list: &[u32], proj: &[Projected], rect: Rect, acc: &mut Acc) {
         match blend {
-            Blend::Sum => tile_sum::<false>(list, proj, cuts, rect, acc),
-            Blend::Alpha => tile_alpha::<false>(list, proj, cuts, rect, acc),
+            Blend::Sum => tile_sum::<false>(list, proj, rect, acc),
+            Blend::Alpha => tile_alpha::<false>(list, proj, rect, acc),
         }
     }
 
     #[target_feature(enable = "avx2,avx512f,avx512vl")]
-    pub fn tile_avx512(
-        blend: Blend,
-        list: &[u32],
-        proj: &[Projected],
-        cuts: &[f32],
-        rect: Rect,
-        acc: &mut Acc,
-    ) {
+    pub fn tile_avx512(blend: Blend, list: &[u32], proj: &[Projected], rect: Rect, acc: &mut Acc) {
         match blend {
-            Blend::Sum => tile_sum::<true>(list, proj, cuts, rect, acc),
-            Blend::Alpha => tile_alpha::<true>(list, proj, cuts, rect, acc),
+            Blend::Sum => tile_sum::<true>(list, proj, rect, acc),
+            Blend::Alpha => tile_alpha::<true>(list, proj, rect, acc),
         }
     }
 }

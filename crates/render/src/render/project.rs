@@ -85,6 +85,8 @@ pub struct Projected {
     /// Pixels whose centre lies within `EXTENT_SIGMAS` standard deviations along x and y,
     /// clipped to the image. No pixel outside it is ever touched.
     pub bbox: PixelBox,
+    /// [`Projected::cutoff`], computed once here: every tile a Gaussian visits asks for it.
+    cut: f32,
 }
 
 impl Projected {
@@ -121,7 +123,7 @@ impl Projected {
     /// evaluated exactly as the contract says.
     #[inline]
     pub fn cutoff(&self) -> f32 {
-        cutoff_of(self.opacity)
+        self.cut
     }
 }
 
@@ -195,6 +197,7 @@ pub fn project(scene: &Scene, index: usize, width: u32, height: u32) -> Option<P
         opacity,
         color,
         bbox: PixelBox { x0, y0, x1, y1 },
+        cut: cutoff_of(opacity),
     })
 }
 

@@ -66,7 +66,7 @@ fn reach(cut: f32, s: f64) -> f64 {
 }
 
 /// The tiles `(lo, hi)` (inclusive tile columns) of a band of pixel rows `rows` where `g`
-/// may reach its cut-off `cut`: those that the ellipse `Q = −2·power ≤ t` meets within
+/// may reach its cut-off ([`Projected::cutoff`]): those that the ellipse `Q = −2·power ≤ t` meets within
 /// the rows of the box in the band (`t` the cut-off with the margin for rounding),
 /// widened by a pixel each way. `None` where it meets none.
 ///
@@ -74,7 +74,7 @@ fn reach(cut: f32, s: f64) -> f64 {
 /// reaches; deciding that once per band, in closed form, costs less than a test per tile
 /// in the tile loops, and keeps those tiles' lists shorter. Only a shortcut: every pixel
 /// of a kept tile is evaluated by the rule.
-pub fn band_tiles(g: &Projected, cut: f32, rows: Range<u32>) -> Option<(u32, u32)> {
+pub fn band_tiles(g: &Projected, rows: Range<u32>) -> Option<(u32, u32)> {
     let b = &g.bbox;
     let ys = b.y0.max(rows.start)..(b.y1 + 1).min(rows.end);
     if ys.is_empty() {
@@ -97,7 +97,7 @@ pub fn band_tiles(g: &Projected, cut: f32, rows: Range<u32>) -> Option<(u32, u32
         dys[0].abs().max(dys[1].abs()),
     );
     let t = reach(
-        cut,
+        g.cutoff(),
         a.abs() * mx * mx + c.abs() * my * my + 2.0 * bb.abs() * mx * my,
     );
     let det = a * c - bb * bb;
@@ -253,10 +253,12 @@ impl TileLists {
             let mut out = Vec::new();
             for (k, g) in (first..).zip(chunk) {
                 let b = g.bbox;
-                let cut = g.cutoff();
                 for ty in (b.y0 / TILE).max(rows.start)..(b.y1 / TILE + 1).min(rows.end) {
-                    if let Some((lo, hi)) = band_tiles(g, cut, ty * TILE..(ty + 1) * TILE) {
-                        out.push((k as u32, ty - rows.start, lo, hi.min(tiles_x - 1)));
+                    match band_tiles(g, ty * TILE..(ty + 1) * TILE) {
+                        Some((lo, hi)) if lo < tiles_x => {
+                            out.push((k as u32, ty - rows.start, lo, hi.min(tiles_x - 1)))
+                        }
+                        _ => {}
                     }
                 }
             }
@@ -374,7 +376,7 @@ mod tests {
                 for g in &super::super::project_scene(&scene, w, h) {
                     for band in 0..h.div_ceil(TILE) {
                         let rows = band * TILE..((band + 1) * TILE).min(h);
-                        let tiles = band_tiles(g, g.cutoff(), rows.clone());
+                        let tiles = band_tiles(g, rows.clone());
                         if g.bbox.y0 < rows.end && rows.start <= g.bbox.y1 {
                             boxed += g.bbox.x1 / TILE - g.bbox.x0 / TILE + 1;
                             kept += tiles.map_or(0, |(lo, hi)| hi - lo + 1);
@@ -400,7 +402,7 @@ mod tests {
         let mut lists = vec![Vec::new(); tiles_x as usize * rows.len()];
         for (k, g) in proj.iter().enumerate() {
             for ty in g.bbox.y0 / TILE..=g.bbox.y1 / TILE {
-                let reached = band_tiles(g, g.cutoff(), ty * TILE..(ty + 1) * TILE);
+                let reached = band_tiles(g, ty * TILE..(ty + 1) * TILE);
                 for tx in g.bbox.x0 / TILE..=g.bbox.x1 / TILE {
                     let reaches = reached.is_some_and(|(lo, hi)| (lo..=hi).contains(&tx));
                     if rows.contains(&ty) && tx < tiles_x && reaches {
