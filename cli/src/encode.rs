@@ -46,7 +46,9 @@ pub struct Args {
     iterations: Option<u32>,
     /// Expert override of the bit depths, `POSITION,COVARIANCE,COLOUR,OPACITY[,ANGLE]`
     /// (each 1..=24; without ANGLE, one bit under the covariance's scales); by default
-    /// they are chosen from the image size (for 768×512 in `sum` mode: 12,6,8,6,7).
+    /// they are chosen from the image size (for 768×512 in `sum` mode: 12,6,8,6,7), and
+    /// in `sum` mode the colour's from the fit's error (5 to 10 bits: coarser where the
+    /// Gaussians cannot follow the texture, so that the bits buy more of them).
     #[arg(long, value_name = "P,C,K,O[,A]")]
     bits: Option<String>,
     /// Initialization: content-adaptive, or the paper's random cold start.

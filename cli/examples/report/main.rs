@@ -3,7 +3,7 @@
 //! ```sh
 //! cargo run --release --example report -- [--kodak DIR] [--lol DIR] [--bpp 0.5,1.0]
 //!     [--iterations T] [--limit N] [--curve-image FILE] [--curve-iterations T] [--out DIR]
-//!     [--quick | --enhance-only | --effort-only] [--efforts 1,3,5,7,9] [--effort-keep]
+//!     [--quick | --enhance-only | --effort-only | --encode-only] [--efforts 1,3,5,7,9] [--effort-keep]
 //!     [--no-kodak] [--no-lol] [--no-curve] [--no-effort]
 //! ```
 //!
@@ -79,6 +79,9 @@ struct Cli {
     /// Only the effort section.
     #[arg(long, group = "only")]
     effort_only: bool,
+    /// Only the encoder section (quality against size and time).
+    #[arg(long, group = "only")]
+    encode_only: bool,
     /// The effort levels the effort section times.
     #[arg(long, value_delimiter = ',', default_value = "1,2,3,4,5,6,7,8,9",
           value_parser = clap::value_parser!(u8).range(1..=9))]
@@ -104,6 +107,7 @@ struct Args {
     quick: bool,
     enhance_only: bool,
     effort_only: bool,
+    encode_only: bool,
     efforts: Vec<u8>,
     effort_keep: bool,
 }
@@ -126,6 +130,7 @@ fn parse_args() -> Args {
         quick: c.quick,
         enhance_only: c.enhance_only,
         effort_only: c.effort_only,
+        encode_only: c.encode_only,
         efforts: if c.no_effort { Vec::new() } else { c.efforts },
         effort_keep: c.effort_keep,
     }
@@ -227,6 +232,10 @@ fn main() {
                 args.effort_keep,
             );
         }
+        return;
+    }
+    if args.encode_only {
+        encode::section(&args, &stamp);
         return;
     }
     replace_section("decode", &decode::section(&stamp));

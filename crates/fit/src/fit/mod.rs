@@ -9,7 +9,8 @@
 //! 4. quantization-aware fine-tuning: the last iterations render the *quantized*
 //!    parameters (straight-through gradients), so the stored file, not the float model,
 //!    reaches the quality;
-//! 5. quantize with bit depths fitted to each component's range, solve the colours
+//! 5. quantize with bit depths fitted to each component's range (in `sum` mode the
+//!    colour's depth chosen halfway through the fit from its error, [`depth`]), solve the colours
 //!    once more for the quantized geometry ([`lsq`] again), write, decode the bytes and
 //!    record the PSNR of what was stored.
 //!
@@ -21,6 +22,7 @@
 //! it found ([`effort`] chooses how much of each).
 
 pub mod dark;
+pub mod depth;
 pub mod effort;
 mod error;
 pub mod init;
@@ -241,15 +243,16 @@ pub struct Encoded {
 }
 
 /// Bit depths for an image: positions to 1/4 pixel of the longer side, colour 8 bits,
-/// and in `sum` mode covariance log-scales 6 bits. Chosen on LOL eval15's normal-light
+/// and in `sum` mode covariance log-scales 6 bits. In `sum` mode the colour's 8 bits are
+/// where a fit starts: [`encode`] then chooses the colour depth from the fit's own error
+/// ([`depth`]) unless the caller gave the depths. Chosen on LOL eval15's normal-light
 /// images (not Kodak, which the report scores) at 0.5 and 1 bpp, where coarser codes buy
 /// more Gaussians within the budget:
 /// * Positions 12 or 13 bits and covariance and colour 6 to 9 bits (BENCHMARKS.md, bit
-///   depths chosen on a validation set): 1/4 pixel was as good as 1/8, and colour below 8
-///   bits lost more than the extra Gaussians bought back. With 6-bit scales, 6-bit colour
-///   lost 0.8 dB again and
-///   7 bits tied with 8 (within ±0.04 dB), so the colour keeps 8 bits: the finer steps
-///   that stage 2's rewritten colours also use.
+///   depths chosen on a validation set): 1/4 pixel was as good as 1/8, and, on those
+///   smooth images, colour below 8 bits lost more than the extra Gaussians bought back
+///   (7 bits tied with 8 within ±0.04 dB, 6 bits lost 0.8 dB). On textured photographs
+///   (photos12) 6 or 7 bits won by 0.2–0.8 dB: hence the choice per image.
 /// * The scales take 6 bits rather than 8 (+0.23 dB at 1 bpp, +0.17 at 0.5, and +0.24
 ///   at effort 1): the stored colours are solved for the stored geometry, which absorbs most of what coarser scales cost. 5 bits lose again
 ///   (−0.27 dB at 1 bpp against 6). `alpha` mode was not measured again and keeps 8.
@@ -731,6 +734,14 @@ struct Runner<'o, 'p> {
     /// `opts.lr` for the image's size ([`rates_for`]).
     lr: LearningRates,
     bits: BitDepths,
+    /// Whether the colour depth is still to be chosen from the fit ([`depth`]): at the
+    /// second densification of the first full-resolution run, so that the budget is then
+    /// filled at the chosen depth and the quantization-aware steps use it (a fit without
+    /// densification keeps the depth it started with).
+    choose_color: bool,
+    /// PSNR of the last measured step against the image being fitted (brightened, for a
+    /// dark image).
+    last_psnr: f64,
     /// The byte budget (bits per pixel) that the densification steps fill, once the
     /// Gaussians' own cost can be measured; `None` where there is none to fill.
     fill: Option<f32>,
@@ -760,6 +771,9 @@ impl Runner<'_, '_> {
         let base = fitter.steps;
         for it in 0..total {
             if opts.lab().densify && densify_at.contains(&it) && it > 0 {
+                if it == densify_at[1] {
+                    self.choose_color_bits(fitter);
+                }
                 let n_now = fitter.params.len();
                 let n = self.filling(fitter).unwrap_or(n_now);
                 fitter.prune_and_grow(0.5, n, n);
@@ -779,6 +793,27 @@ impl Runner<'_, '_> {
         }
         while let Some(m) = fitter.flush() {
             self.measured(m, base, fitter, phase, qat_from);
+        }
+    }
+
+    /// Choose the colour depth from the fit so far ([`depth::color_bits`]), once, at full
+    /// resolution.
+    fn choose_color_bits(&mut self, fitter: &mut Fitter) {
+        let t = fitter.target;
+        if !self.choose_color || (t.width, t.height) != self.size {
+            return;
+        }
+        self.choose_color = false;
+        fitter.sync();
+        let mut scene = fitter.scene();
+        for c in &mut scene.gaussians.cov {
+            *c = params::canonical_rotation(*c).0;
+        }
+        let per_g = 8.0 * f64::from(coded_bytes_per_gaussian(&scene, self.bits));
+        let mse = 10f64.powf(-self.last_psnr / 10.0);
+        let g = &scene.gaussians;
+        if let Some(b) = depth::color_bits(&g.colors, &g.cov, mse, per_g) {
+            self.bits.color = b;
         }
     }
 
@@ -815,6 +850,7 @@ impl Runner<'_, '_> {
         qat_from: u32,
     ) -> bool {
         let it = (m.step - base) as u32;
+        self.last_psnr = m.psnr;
         let work = phase.work_before + f64::from(it) * phase.step_work;
         let p = Progress {
             iteration: phase.first + it,
@@ -962,6 +998,12 @@ pub fn encode(
         opts,
         lr: rates_for(&opts.lr, w, h),
         bits,
+        // A dark image fitted brightened keeps its colour depth: most of its error is
+        // sensor noise that the Gaussians should not follow, not texture, and stage 2
+        // lifts whatever noise coarser codes add (LOL val30 through stage 2: SSIM 0.795
+        // with 8 bits, 0.784 with the rule's 6 and 7, whether stage 2 stores 8 or not).
+        choose_color: opts.bits.is_none() && opts.blend == Blend::Sum && gain <= 1.0,
+        last_psnr: f64::NAN,
         fill: match opts.budget {
             Budget::Bpp(b) => Some(b),
             _ => None,
@@ -1052,6 +1094,8 @@ pub fn encode(
     let fine_steps = opts.iterations - coarse.as_ref().map_or(0, |c| c.1);
     // The passes below shrink to the budget; refilling it there would undo them.
     runner.fill = None;
+    runner.choose_color = false;
+    let bits = runner.bits;
     let mut result = finish(&mut fitter, bits, opts, truth, gain)?;
     // Budgets: shrink to the byte budget, or grow to the quality target.
     for _ in 0..4 {

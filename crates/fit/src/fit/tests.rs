@@ -411,3 +411,44 @@ fn the_fine_steps_go_on_from_the_coarse_ones() {
         "{switch:.2} dB, ten steps later {later:.2} dB"
     );
 }
+
+/// In `sum` mode the colour depth follows the fit's error: a texture the Gaussians
+/// cannot follow is stored with coarser colour codes than a smooth image (whose error is
+/// small), and depths the caller gave are kept.
+#[test]
+fn the_colour_depth_follows_the_fit_error() {
+    let (w, h) = (64u32, 48u32);
+    let smooth = super::Target {
+        width: w,
+        height: h,
+        data: (0..w * h)
+            .flat_map(|i| {
+                let (x, y) = ((i % w) as f32 / w as f32, (i / w) as f32 / h as f32);
+                [0.2 + 0.6 * x, 0.3 + 0.4 * y, 0.5]
+            })
+            .collect(),
+    };
+    let mut rng = SplitMix64::new(3);
+    let noise = super::Target {
+        data: (0..w * h * 3).map(|_| rng.unit()).collect(),
+        ..smooth.clone()
+    };
+    let opts = EncodeOptions {
+        budget: super::Budget::Bpp(2.0),
+        iterations: 60,
+        coarse: None,
+        ..EncodeOptions::default()
+    };
+    let depth = |t: &super::Target, o: &EncodeOptions| {
+        let e = super::encode(t, o, gsi_gpu::Device::Cpu, &mut |_| {}).unwrap();
+        e.records.colors.quantizers[0].bits
+    };
+    let (rough, fine) = (depth(&noise, &opts), depth(&smooth, &opts));
+    assert!(rough < fine, "noise {rough} bits, smooth {fine} bits");
+    assert!(super::depth::COLOR_BITS.contains(&rough) && super::depth::COLOR_BITS.contains(&fine));
+    let given = EncodeOptions {
+        bits: Some(super::default_bits(w, h, Blend::Sum)),
+        ..opts
+    };
+    assert_eq!(depth(&noise, &given), 8);
+}

@@ -264,10 +264,10 @@ impl TileLists {
             }
             out
         };
-        const CHUNK: usize = 1024;
         #[cfg(feature = "parallel")]
         let reached: Vec<_> = {
             use rayon::prelude::*;
+            const CHUNK: usize = 1024;
             let parts: Vec<Vec<_>> = projected
                 .par_chunks(CHUNK)
                 .enumerate()
