@@ -13,9 +13,9 @@
 //! (differentiate `D(N(Δ)) + noise(Δ)` with `N = budget / β(Δ)` and `dβ/dΔ = −3/(Δ ln 2)`).
 //! With γ = 0.9 (doubling the Gaussians buys about 2.7 dB at 1 bpp) and β ≈ 45, the noise
 //! should be about 4 % of the error: a photograph fitted to 23 dB (texture the Gaussians
-//! cannot follow) wants steps four times coarser than one fitted to 35 dB. One depth for
-//! every image, 8 bits, spent the same bits on both; the rule is a slope and a ratio, not
-//! a table fitted to a set of images.
+//! cannot follow) wants steps four times coarser than one fitted to 35 dB, where a single
+//! depth for every image would spend the same bits on both. The rule is a slope and a
+//! ratio, not a table fitted to a set of images.
 //!
 //! The noise of `sum` blending is the colour error of each Gaussian spread by its weights:
 //! a pixel's error is `Σ_i w_i(p)·e_i`, the `e_i` independent and uniform over a step, so
@@ -29,9 +29,9 @@ use gsi_format::format::Quantizer;
 /// Gaussians buys at 1 bpp (γ = 2.7 / (10·log10 2)).
 const GAMMA: f64 = 0.9;
 
-/// The depths the rule may choose: below 5 bits a step is a twelfth of the colour range
-/// and the noise no longer behaves as the rule assumes (uniform, independent); above 10
-/// the codes cost more than any fit error a budget leaves can use.
+/// The depths the rule may choose: under 5 bits (31 steps over the colour range) a step
+/// is too coarse for the noise to behave as the rule assumes (uniform, independent of
+/// the image); at 10 bits a step over a typical range of ±1.1 is half an 8-bit level.
 pub const COLOR_BITS: std::ops::RangeInclusive<u8> = 5..=10;
 
 /// The colour depth for Gaussians of `colors` and log-scale covariances `cov`
