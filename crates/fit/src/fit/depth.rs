@@ -27,7 +27,7 @@ use gsi_format::format::Quantizer;
 
 /// The fit error's fall with the count: `MSE ∝ N^−γ`, from the 2.7 dB a doubling of the
 /// Gaussians buys at 1 bpp (γ = 2.7 / (10·log10 2)).
-const GAMMA: f64 = 0.9;
+pub(crate) const GAMMA: f64 = 0.9;
 
 /// The depths the rule may choose: under 5 bits (31 steps over the colour range) a step
 /// is too coarse for the noise to behave as the rule assumes (uniform, independent of

@@ -452,3 +452,56 @@ fn the_colour_depth_follows_the_fit_error() {
     };
     assert_eq!(depth(&noise, &given), 8);
 }
+
+/// At a densification a Gaussian that holds back less error than one more Gaussian would
+/// remove is dropped, and only where the fit's error is large: the same faint Gaussian
+/// stays on a target the scene renders exactly, and a bar of 0 keeps it anywhere.
+#[test]
+fn pruning_weighs_a_gaussian_against_the_fit_error() {
+    use super::{init::pixel_lsr, Fitter, Loss};
+    let (w, h) = (64u32, 48u32);
+    let (fw, fh) = (w as f32, h as f32);
+    let scene = Scene {
+        tone: None,
+        width: w,
+        height: h,
+        blend: Blend::Sum,
+        cov_param: CovParam::LogScaleRotation,
+        gaussians: GaussianSet {
+            positions: vec![[0.5, 0.5], [0.25, 0.25]],
+            cov: vec![
+                pixel_lsr(10.0, 8.0, 0.3, fw, fh),
+                pixel_lsr(1.0, 1.0, 0.0, fw, fh),
+            ],
+            colors: vec![[0.5; 3], [0.05; 3]],
+            opacity: None,
+        },
+    };
+    let exact = render(&scene, w, h).unwrap();
+    // ±0.1 on every value: a mean squared error of 0.01 that no two Gaussians follow (a
+    // bar of 0.9·0.01·9216/2 ≈ 41, against 0.024 for the faint one and 190 for the other).
+    let mut noisy = exact.clone();
+    for (i, v) in noisy.data.iter_mut().enumerate() {
+        *v += if (i / 3 + i / 3 / w as usize) % 2 == 0 {
+            0.1
+        } else {
+            -0.1
+        };
+    }
+    let kept = |target: &_, worth: f64| {
+        let mut f = Fitter::with_params(target, scene.gaussians.clone(), Blend::Sum, Loss::L2, 1);
+        f.prune_and_grow(0.0, worth, usize::MAX, 0);
+        f.params.colors.iter().map(|c| c[0]).collect::<Vec<_>>()
+    };
+    assert_eq!(kept(&noisy, 1.0), vec![0.5], "the faint Gaussian stayed");
+    assert_eq!(kept(&exact, 1.0), vec![0.5, 0.05]);
+    assert_eq!(kept(&noisy, 0.0), vec![0.5, 0.05]);
+    // The estimate: |c|²·Σ_p w², here 3·0.05²·π·1² (the Gaussian lies inside the image).
+    let f = Fitter::with_params(&noisy, scene.gaussians.clone(), Blend::Sum, Loss::L2, 1);
+    let loss = f.contributions().loss[1];
+    let expected = 3.0 * 0.05f64.powi(2) * std::f64::consts::PI;
+    assert!(
+        (loss / expected - 1.0).abs() < 0.05,
+        "{loss} against {expected}"
+    );
+}
