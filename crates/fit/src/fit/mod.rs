@@ -776,9 +776,9 @@ impl Phase {
 /// neighbours and the colour solve that follows take over part of it), so the bar that
 /// balances the two lies above 1. On the validation sets at equal bytes (photos12 and
 /// eval15's normal-light images, 0.5 and 1 bpp), against the contribution test alone:
-/// 1 gained +0.10 to +0.35 dB, 2 +0.19 to +0.39, 4 +0.26 to +0.36, 8 −0.21 to +0.24; 2
-/// and 4 tie within 0.03 dB on average, and 2, nearer the bound, moves dark images fitted
-/// brightened least (LOL val30 through stage 2: SSIM 0.793 against 0.795, 4 gave 0.789).
+/// 1 gained +0.10 to +0.35 dB, 2 +0.19 to +0.39, 4 +0.26 to +0.36, 8 +0.13 to +0.24 (on
+/// three of the four); 2 and 4 tie within 0.03 dB on average, and 2, nearer the bound,
+/// moves dark images fitted brightened least (LOL val30 through stage 2: SSIM 0.793 against 0.795, 4 gave 0.789).
 const PRUNE_WORTH: f64 = 2.0;
 
 /// Runs the optimizer for [`encode`]: pruning and re-placement at fixed points of each run,
