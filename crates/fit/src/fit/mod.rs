@@ -619,19 +619,13 @@ impl<'a> Fitter<'a> {
             let pg = raster::backward(&fwd, &projected, &ones, Need::ColorOnly);
             (pg.iter().map(|g| g.color).collect(), fwd.image)
         };
+        let sum = self.blend == Blend::Sum;
         let mut score = vec![0f32; self.params.len()];
-        let mut loss = vec![
-            if self.blend == Blend::Sum {
-                0.0
-            } else {
-                f64::INFINITY
-            };
-            self.params.len()
-        ];
+        let mut loss = vec![if sum { 0.0 } else { f64::INFINITY }; self.params.len()];
         for (g, d) in projected.iter().zip(&weights) {
             let cmax = g.color.iter().fold(0f32, |m, c| m.max(c.abs()));
             score[g.index] = d[0] * cmax.max(1.0 / 255.0);
-            if self.blend == Blend::Sum {
+            if sum {
                 // Σ_p w² is half of Σ_p w for a Gaussian wholly inside the image (∫w² = πσ1σ2,
                 // ∫w = 2πσ1σ2), and shrinks with Σ_p w where the border cuts it off.
                 let c2: f64 = g.color.iter().map(|&c| f64::from(c).powi(2)).sum();
@@ -660,12 +654,13 @@ impl<'a> Fitter<'a> {
     ) -> usize {
         self.sync();
         let Contributions { score, loss, image } = self.contributions();
-        let sse: f64 = image
-            .iter()
-            .zip(&self.target.data)
-            .map(|(a, b)| f64::from(a - b).powi(2))
-            .sum();
-        let bar = min_worth * depth::GAMMA * sse / score.len().max(1) as f64;
+        let err = self.pixel_errors(&image);
+        let bar = if min_worth > 0.0 {
+            let sse: f64 = err.iter().copied().map(f64::from).sum();
+            min_worth * depth::GAMMA * sse / score.len().max(1) as f64
+        } else {
+            0.0
+        };
         let mut order: Vec<usize> = (0..score.len()).collect();
         order.sort_by(|&a, &b| score[b].total_cmp(&score[a]).then(a.cmp(&b)));
         let mut keep = vec![false; score.len()];
@@ -677,25 +672,30 @@ impl<'a> Fitter<'a> {
         let grow = n.saturating_sub(self.params.len());
         self.adam.resize(&keep, 0);
         if grow > 0 {
-            let added = self.add_at_error(&image, grow);
+            let added = self.add_at_error(&image, &err, grow);
             self.adam
                 .resize(&vec![true; self.params.len() - added], added);
         }
         removed
     }
 
+    /// Squared error of `image` against the target at each pixel, channels summed.
+    fn pixel_errors(&self, image: &[f32]) -> Vec<f32> {
+        image
+            .chunks_exact(3)
+            .zip(self.target.data.chunks_exact(3))
+            .map(|(a, b)| (0..3).map(|c| (a[c] - b[c]).powi(2)).sum())
+            .collect()
+    }
+
     /// Append up to `k` small Gaussians at pixels sampled in proportion to the squared
-    /// error; none where the render is already exact. Returns how many were added.
-    fn add_at_error(&mut self, image: &[f32], k: usize) -> usize {
+    /// error `err` of `image` ([`Fitter::pixel_errors`]); none where the render is already
+    /// exact. Returns how many were added.
+    fn add_at_error(&mut self, image: &[f32], err: &[f32], k: usize) -> usize {
         let t = self.target;
         let (w, h) = (t.width as usize, t.height as usize);
-        let err: Vec<f32> = image
-            .chunks_exact(3)
-            .zip(t.data.chunks_exact(3))
-            .map(|(a, b)| (0..3).map(|c| (a[c] - b[c]).powi(2)).sum())
-            .collect();
         let mut rng = gsi_optim::rng::SplitMix64::new(self.seed ^ self.params.len() as u64);
-        let picks = init::stratified(&err, w, h, k, &mut rng);
+        let picks = init::stratified(err, w, h, k, &mut rng);
         let n_all = (self.params.len() + k) as f32;
         let sigma = (0.35 * ((w * h) as f32 / n_all).sqrt()).max(0.5);
         let (fw, fh) = (w as f32, h as f32);
@@ -778,7 +778,8 @@ impl Phase {
 /// eval15's normal-light images, 0.5 and 1 bpp), against the contribution test alone:
 /// 1 gained +0.10 to +0.35 dB, 2 +0.19 to +0.39, 4 +0.26 to +0.36, 8 +0.13 to +0.24 (on
 /// three of the four); 2 and 4 tie within 0.03 dB on average, and 2, nearer the bound,
-/// moves dark images fitted brightened least (LOL val30 through stage 2: SSIM 0.793 against 0.795, 4 gave 0.789).
+/// moves dark images fitted brightened least (LOL val30 through stage 2: SSIM 0.793
+/// against 0.795; 4 gave 0.789).
 const PRUNE_WORTH: f64 = 2.0;
 
 /// Runs the optimizer for [`encode`]: pruning and re-placement at fixed points of each run,
