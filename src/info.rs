@@ -43,6 +43,12 @@ fn gain_range(g: &crate::format::GainMap) -> (f32, f32) {
     (q.min, q.max)
 }
 
+/// The range of a chroma map's scales.
+fn chroma_range(c: &crate::format::ChromaMap) -> (f32, f32) {
+    let q = &c.scales.quantizers[0];
+    (q.min, q.max)
+}
+
 /// Bits per Gaussian that each attribute chunk spends, its preamble included (`None`
 /// without Gaussians).
 fn bits_per_gaussian(f: &GsiFile) -> Option<Vec<(ChunkType, f64)>> {
@@ -121,6 +127,10 @@ pub fn to_json(f: &GsiFile) -> serde_json::Value {
                 "gain": e.gain.as_ref().map(|g| {
                     let (lo, hi) = gain_range(g);
                     json!({"map": [g.width, g.height], "min": lo, "max": hi})
+                }),
+                "chroma": e.chroma.as_ref().map(|c| {
+                    let (lo, hi) = chroma_range(c);
+                    json!({"map": [c.width, c.height], "min": lo, "max": hi})
                 }),
                 "revertible": stage.revertible,
             }),
@@ -211,6 +221,15 @@ pub fn to_text(f: &GsiFile) -> String {
                         format!(
                             ", then a {}x{} gain map ({lo:.2} to {hi:.2}: the shadows lifted on their own)",
                             g.width, g.height
+                        )
+                    }
+                    None => String::new(),
+                } + &match &e.chroma {
+                    Some(c) => {
+                        let (lo, hi) = chroma_range(c);
+                        format!(
+                            ", then a {}x{} chroma map ({lo:.2} to {hi:.2}: the colour of what was within the noise of black moved towards grey)",
+                            c.width, c.height
                         )
                     }
                     None => String::new(),

@@ -201,16 +201,62 @@ mod corpus {
         // Stage 2: a file enhanced in the container (gENH and gORC before GEND); the
         // `denoised` ones with a layout-2 gENH (spec §7.2.1), the `toned` ones with a
         // layout-3 gENH (§7.2.2), with both records and with the tone record alone; the
-        // `gained` ones with a layout-4 gENH (a gain map, §7.2.3) and a GTRC (§6.6).
-        for (name, blend, denoised, toned, gained) in [
-            ("enhanced-sum-160", Sum, false, false, false),
-            ("enhanced-alpha-160", Alpha, false, false, false),
-            ("enhanced-denoised-sum-160", Sum, true, false, false),
-            ("enhanced-denoised-alpha-160", Alpha, true, false, false),
-            ("enhanced-denoised-toned-sum-160", Sum, true, true, false),
-            ("enhanced-toned-alpha-160", Alpha, false, true, false),
-            ("enhanced-denoised-gained-sum-160", Sum, true, false, true),
-            ("enhanced-gained-alpha-160", Alpha, false, false, true),
+        // `gained` ones with a layout-4 gENH (a gain map, §7.2.3) and a GTRC (§6.6); the
+        // `chroma` ones with a layout-5 gENH (a chroma map, §7.2.4), after a gain map and
+        // alone.
+        for (name, blend, denoised, toned, gained, chroma) in [
+            ("enhanced-sum-160", Sum, false, false, false, false),
+            ("enhanced-alpha-160", Alpha, false, false, false, false),
+            ("enhanced-denoised-sum-160", Sum, true, false, false, false),
+            (
+                "enhanced-denoised-alpha-160",
+                Alpha,
+                true,
+                false,
+                false,
+                false,
+            ),
+            (
+                "enhanced-denoised-toned-sum-160",
+                Sum,
+                true,
+                true,
+                false,
+                false,
+            ),
+            ("enhanced-toned-alpha-160", Alpha, false, true, false, false),
+            (
+                "enhanced-denoised-gained-sum-160",
+                Sum,
+                true,
+                false,
+                true,
+                false,
+            ),
+            (
+                "enhanced-gained-alpha-160",
+                Alpha,
+                false,
+                false,
+                true,
+                false,
+            ),
+            (
+                "enhanced-gained-chroma-sum-160",
+                Sum,
+                false,
+                false,
+                true,
+                true,
+            ),
+            (
+                "enhanced-chroma-alpha-160",
+                Alpha,
+                false,
+                false,
+                false,
+                true,
+            ),
         ] {
             let mut scene = random_scene(13, spec(64, 40, 160, blend, Lsr, blend == Alpha));
             for c in &mut scene.gaussians.colors {
@@ -223,9 +269,12 @@ mod corpus {
                         &Records::from_scene(&scene, BitDepths::default()),
                         "generator=gsi-synth",
                     ),
-                    denoised,
-                    toned,
-                    gained,
+                    Stage2 {
+                        denoised,
+                        toned,
+                        gained,
+                        chroma,
+                    },
                 ),
                 expect: None,
             });
@@ -254,8 +303,15 @@ mod corpus {
     /// as `gsi enhance` would store one; with `denoised`, one that smooths the colours
     /// first (two passes, range 0.05); with `toned`, one that ends with a tone curve
     /// (`1.3·x^0.7`, three passes); with `gained`, one with a 4×3 gain map (1 to 6) after
-    /// the mixture, shown through a `GTRC` curve (`min(1.8·sqrt(x), 0.97)`, 64 knots).
-    pub(super) fn enhanced(bytes: &[u8], denoised: bool, toned: bool, gained: bool) -> Vec<u8> {
+    /// the mixture, shown through a `GTRC` curve (`min(1.8·sqrt(x), 0.97)`, 64 knots);
+    /// with `chroma`, one with a 5×4 chroma map (0 to 1) after that.
+    pub(super) fn enhanced(bytes: &[u8], stored: Stage2) -> Vec<u8> {
+        let Stage2 {
+            denoised,
+            toned,
+            gained,
+            chroma,
+        } = stored;
         use crate::enhance::{apply_record, colors_like, mixture::clamp_for, Enhancer};
         let file = format::ChunkedFile::parse(bytes, format::Limits::default()).expect("own file");
         let scene = file.file.records.to_scene();
@@ -301,7 +357,15 @@ mod corpus {
                 gains: format::Attribute::fit(&gains, [8]),
             }
         });
-        let curve = gained.then(|| {
+        record.chroma = chroma.then(|| {
+            let scales: Vec<[f32; 1]> = (0..20).map(|_| [rng.range(0.0, 1.0)]).collect();
+            format::ChromaMap {
+                width: 5,
+                height: 4,
+                scales: format::Attribute::fit(&scales, [8]),
+            }
+        });
+        let curve = (gained || chroma).then(|| {
             crate::model::ToneCurve::sample(64, |x| (1.8 * x.sqrt()).min(0.97)).expect("64 knots")
         });
         let applied = apply_record(&record, &scene, &format::Limits::default())
@@ -309,6 +373,15 @@ mod corpus {
         let colors = colors_like(&applied, &file.file.records.colors);
         file.with_colors(&colors, &record, curve.as_ref(), true, 19)
             .expect("in-memory rewrite")
+    }
+
+    /// Which of stage 2's stored steps [`enhanced`] writes besides the mixture.
+    #[derive(Clone, Copy, Default)]
+    pub(super) struct Stage2 {
+        pub denoised: bool,
+        pub toned: bool,
+        pub gained: bool,
+        pub chroma: bool,
     }
 
     /// Records whose covariances are singular, vanishing or enormous, and Gaussians far
@@ -509,7 +582,7 @@ mod corpus {
             (ChunkType::ENHANCER, "duplicate-genh"),
             (ChunkType::ORIGINAL_COLORS, "duplicate-gorc"),
         ] {
-            let mut p = chunks(&enhanced(&base, false, false, false));
+            let mut p = chunks(&enhanced(&base, Stage2::default()));
             let at = p.iter().position(|(t, _)| *t == ty).expect("stage-2 chunk");
             p.insert(at, p[at].clone());
             files.push((K::ChunkOrder, what, assemble(&p)));

@@ -464,9 +464,10 @@ fn genh_layout_2_reads_writes_and_refuses_as_specified() {
     ] {
         assert_eq!(kind, ErrorKind::InvalidValue, "{what}");
     }
-    assert_eq!(refused(&|b| b[0] = 5), ErrorKind::UnsupportedVersion);
-    // Byte 3 is 0 in layouts 1 and 2, and never 0 in layouts 3 and 4.
+    assert_eq!(refused(&|b| b[0] = 6), ErrorKind::UnsupportedVersion);
+    // Byte 3 is 0 in layouts 1 and 2, and never 0 in layouts 3 to 5.
     assert_eq!(refused(&|b| b[0] = 4), ErrorKind::InvalidValue);
+    assert_eq!(refused(&|b| b[0] = 5), ErrorKind::InvalidValue);
     assert_eq!(refused(&|b| b[3] = 1), ErrorKind::InvalidValue);
     assert_eq!(refused(&|b| b[0] = 3), ErrorKind::InvalidValue);
     // A layout-2 chunk too short for its denoise record.
@@ -603,6 +604,76 @@ fn genh_layout_4_reads_writes_and_refuses_as_specified() {
             .windows(4)
             .rposition(|w| w == 2.0f32.to_be_bytes())
             .expect("the gain block's max");
+        let mut bad = good.clone();
+        bad[at - 4..at].copy_from_slice(&lo.to_be_bytes());
+        bad[at..at + 4].copy_from_slice(&hi.to_be_bytes());
+        let kind = format::EnhancerRecord::parse(&bad, &Limits::default())
+            .expect_err("refused")
+            .kind();
+        assert_eq!(kind, ErrorKind::InvalidValue, "[{lo}, {hi}]");
+    }
+}
+
+/// §7.2 layout 5: a chroma record (bit 3 of byte 3) after the other records and a block
+/// of scales after the other blocks, with or without a gain map; every field outside its
+/// range is refused where the chunk is read, and a decoder of layouts 1 to 4 would have
+/// refused the layout by its number.
+#[test]
+fn genh_layout_5_reads_writes_and_refuses_as_specified() {
+    let (alone, alone_bytes) = corpus_enhancer("enhanced-chroma-alpha-160.gsi");
+    assert_eq!((alone_bytes[0], alone_bytes[3]), (5, 8));
+    assert!(alone.gain.is_none());
+    let map = alone.chroma.as_ref().expect("a chroma map");
+    assert_eq!((map.width, map.height), (5, 4));
+    assert_eq!(&alone_bytes[68..72], &[0, 5, 0, 4]);
+    assert_eq!(alone.to_payload(19).unwrap(), alone_bytes);
+    let (both, bytes) = corpus_enhancer("enhanced-gained-chroma-sum-160.gsi");
+    assert_eq!((bytes[0], bytes[3]), (5, 12));
+    assert!(both.gain.is_some() && both.chroma.is_some());
+    // The chroma record follows the gain record.
+    assert_eq!(&bytes[68..76], &[0, 4, 0, 3, 0, 5, 0, 4]);
+    assert_eq!(both.to_payload(19).unwrap(), bytes);
+    // Without its chroma map the same enhancer is written as layout 4.
+    let mut four = both.clone();
+    four.chroma = None;
+    assert_eq!(four.to_payload(19).unwrap()[..4], [4, 4, 3, 4]);
+
+    let refused = |edit: &dyn Fn(&mut Vec<u8>)| genh_refused(&bytes, edit);
+    for (what, kind) in [
+        ("records without bit 3", refused(&|b| b[3] = 4)),
+        ("records bit 4", refused(&|b| b[3] = 28)),
+        ("width 0", refused(&|b| b[72..74].copy_from_slice(&[0, 0]))),
+        (
+            "height 1025",
+            refused(&|b| b[74..76].copy_from_slice(&1025u16.to_be_bytes())),
+        ),
+    ] {
+        assert_eq!(kind, ErrorKind::InvalidValue, "{what}");
+    }
+    assert_eq!(refused(&|b| b[0] = 6), ErrorKind::UnsupportedVersion);
+    // Another map size: the last block no longer holds width·height scales.
+    assert!(format::EnhancerRecord::parse(
+        &{
+            let mut b = bytes.clone();
+            b[73] = 6;
+            b
+        },
+        &Limits::default()
+    )
+    .is_err());
+    // Scales outside [0, 1]: the block's range is checked, when written and when read.
+    for (lo, hi) in [(-0.5f32, 0.5f32), (0.25, 1.5)] {
+        let mut r = alone.clone();
+        let q = &mut r.chroma.as_mut().unwrap().scales.quantizers[0];
+        (q.min, q.max) = (lo, hi);
+        assert!(r.to_payload(19).is_err(), "[{lo}, {hi}] written");
+        let mut ok = alone.clone();
+        ok.chroma.as_mut().unwrap().scales.quantizers[0].max = 0.75;
+        let good = ok.to_payload(19).unwrap();
+        let at = good
+            .windows(4)
+            .rposition(|w| w == 0.75f32.to_be_bytes())
+            .expect("the chroma block's max");
         let mut bad = good.clone();
         bad[at - 4..at].copy_from_slice(&lo.to_be_bytes());
         bad[at..at + 4].copy_from_slice(&hi.to_be_bytes());

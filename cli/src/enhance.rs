@@ -85,6 +85,11 @@ pub struct Args {
     /// lifts the darker regions more than the lit ones (format spec §7.2.3).
     #[arg(long)]
     no_local: bool,
+    /// Keep the colour of the darkest regions: by default, where the low image was lit
+    /// within its noise of black, the colour the curve would lift out of the noise and
+    /// the sensor's black level is moved towards grey (format spec §7.2.4).
+    #[arg(long)]
+    keep_shadow_colour: bool,
     /// Seed of the fit's initialization.
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -349,6 +354,7 @@ fn options(args: &Args) -> Result<EnhanceOptions, Failure> {
         curve: Some(CurveOptions {
             exponent: args.tone,
             local: !args.no_local,
+            chroma: !args.keep_shadow_colour,
         }),
         ..defaults
     })

@@ -2,8 +2,9 @@
 //! a panic or more memory than the limits allow. An accepted enhancer must write back to
 //! the same record, and applying it must give finite colours within its clamp or the
 //! identity's range; its denoising (layouts 2 to 4) and its tone curve (layouts 3 and
-//! 4), finite colours, the curve's within `±64`; its gain map (layout 4), finite colours
-//! within `±64` that keep their sign.
+//! 4), finite colours, the curve's within `±64`; its gain map (layouts 4 and 5), finite
+//! colours within `±64` that keep their sign; its chroma map (layout 5), finite colours
+//! within `±64`, each between the colour and its grey.
 
 #![no_main]
 
@@ -83,6 +84,22 @@ fuzz_target!(|data: &[u8]| {
                 assert!(
                     o.is_finite() && o.abs() <= 64.0 && o * c >= 0.0,
                     "{o} from {c}"
+                );
+            }
+        }
+    }
+    if let Some(map) = &record.chroma {
+        for (out, c) in gsi::enhance::chroma::apply(map, &positions, &colors)
+            .iter()
+            .zip(colors)
+        {
+            let y = (0.299 * c[0] + 0.587 * c[1]) + 0.114 * c[2];
+            for (o, c) in out.iter().zip(c) {
+                let (lo, hi) = (c.min(y), c.max(y));
+                assert!(o.is_finite() && o.abs() <= 64.0, "{o} from {c}");
+                assert!(
+                    *o >= lo - 1e-5 * lo.abs().max(1.0) && *o <= hi + 1e-5 * hi.abs().max(1.0),
+                    "{o} outside [{lo}, {hi}]"
                 );
             }
         }

@@ -171,6 +171,7 @@ def enhance(
     weights: Optional[Sequence[float]] = None,
     tone: Optional[float] = None,
     local: bool = True,
+    shadow_colour: bool = False,
     denoise: bool = False,
     force: bool = False,
     discard_original: bool = False,
@@ -183,7 +184,8 @@ def enhance(
 
     The options and defaults are ``gsi enhance``'s: ``exposure`` the mean luma to show the
     result at (default middle grey; ``"auto"`` meters it), ``tone`` the tone curve's power,
-    ``local=False`` no gain map, ``denoise=True`` smoothing across neighbours first,
+    ``local=False`` no gain map, ``shadow_colour=True`` no chroma map (the colour of
+    regions within the noise of black kept), ``denoise=True`` smoothing across neighbours first,
     ``discard_original=True`` a smaller file that cannot be reverted, ``apply_from`` the
     enhancer stored in another file instead of fitting one. A file with no meaningful
     under-exposed part is returned unchanged with a :class:`NotLowLightWarning` unless
@@ -200,6 +202,7 @@ def enhance(
         weights=None if weights is None else [float(w) for w in weights],
         tone=tone,
         local=local,
+        shadow_colour=shadow_colour,
         denoise=denoise,
         force=force,
         discard_original=discard_original,

@@ -242,7 +242,7 @@ fn decode<'py>(
 /// Stage 2 on a file: `(bytes, None)` when enhanced (or an enhancer applied from
 /// `apply_from`), `(data, why)` when the image is left as it is.
 #[pyfunction]
-#[pyo3(signature = (data, *, iterations=None, exposure=None, experts=None, learning_rate=None, weights=None, tone=None, local=true, denoise=false, force=false, discard_original=false, apply_from=None, seed=0, device="cpu", progress=None))]
+#[pyo3(signature = (data, *, iterations=None, exposure=None, experts=None, learning_rate=None, weights=None, tone=None, local=true, shadow_colour=false, denoise=false, force=false, discard_original=false, apply_from=None, seed=0, device="cpu", progress=None))]
 #[allow(clippy::too_many_arguments)]
 fn enhance<'py>(
     py: Python<'py>,
@@ -254,6 +254,7 @@ fn enhance<'py>(
     weights: Option<Vec<f32>>,
     tone: Option<f32>,
     local: bool,
+    shadow_colour: bool,
     denoise: bool,
     force: bool,
     discard_original: bool,
@@ -300,6 +301,7 @@ fn enhance<'py>(
     let curve = defaults.curve.map(|c| gsi::enhance::curve::CurveOptions {
         exponent: tone.unwrap_or(c.exponent),
         local,
+        chroma: !shadow_colour,
     });
     let opts = EnhanceOptions {
         iterations: iterations.unwrap_or(defaults.iterations),

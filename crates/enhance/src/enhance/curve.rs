@@ -78,6 +78,10 @@ pub struct CurveOptions {
     /// Whether the shadows of a scene whose highlights cap the curve are lifted on their
     /// own (a gain map).
     pub local: bool,
+    /// Whether the colour of regions lit within the noise of black is moved towards grey
+    /// (a chroma map, [`super::chroma`]), so that the curve does not show the noise's and
+    /// the black level's colour as a cast.
+    pub chroma: bool,
 }
 
 impl Default for CurveOptions {
@@ -85,6 +89,7 @@ impl Default for CurveOptions {
         CurveOptions {
             exponent: 0.5,
             local: true,
+            chroma: true,
         }
     }
 }

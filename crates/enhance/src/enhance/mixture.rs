@@ -194,6 +194,7 @@ impl Enhancer {
         let map: Vec<[f32; 1]> = self.map.iter().map(|&x| [x]).collect();
         EnhancerRecord {
             gain: None,
+            chroma: None,
             experts: self.experts as u8,
             hidden: h as u8,
             clamp: self.clamp,

@@ -15,11 +15,14 @@
 //! * [`mixture`]: the enhancer as stored and applied (no rendering needed).
 //! * [`denoise`]: the smoothing across neighbouring Gaussians that comes before it.
 //! * [`gain`]: the gain map (local exposure) that comes after it.
+//! * [`chroma`]: the chroma map (the colour of what was within the noise of black) after
+//!   that.
 //! * [`tone`]: the per-Gaussian tone curve of files written before `GTRC`.
 //! * `assess`, `light`, `curve`, `exposure`: the decision, the illumination estimate, the
 //!   curve and the exposure to aim at (feature `encode`).
 //! * `features`, `loss`, `operator`, `fit`: fitting the mixture (feature `encode`).
 
+pub mod chroma;
 pub mod denoise;
 pub mod gain;
 pub mod mixture;
@@ -100,8 +103,8 @@ pub fn apply_from(
 }
 
 /// The colours the stored enhancer `record` makes of `scene`'s (spec §7.2): its
-/// denoising first, where it has one, then the mixture, then its gain map and its
-/// per-Gaussian tone curve, where it has them. Fails only where the footprint search of the denoising or the curve would
+/// denoising first, where it has one, then the mixture, then its gain map, its chroma
+/// map and its per-Gaussian tone curve, where it has them. Fails only where the footprint search of the denoising or the curve would
 /// pass `limits`.
 pub fn apply_record(
     record: &EnhancerRecord,
@@ -122,6 +125,10 @@ pub fn apply_record(
     let colors = Enhancer::from_record(record).apply(&g.positions, &colors);
     let colors = match &record.gain {
         Some(map) => gain::apply(map, &g.positions, &colors),
+        None => colors,
+    };
+    let colors = match &record.chroma {
+        Some(map) => chroma::apply(map, &g.positions, &colors),
         None => colors,
     };
     Ok(match (&record.tone, &nb) {
@@ -252,6 +259,13 @@ pub fn enhance(
         fitted.record.gain = p.gain.clone();
         fitted.colors = p.colors.clone();
         shown_luma = p.mean_luma;
+        // After the gain map, in the order of spec §7.2, from the low image's own levels.
+        if opts.curve.is_some_and(|c| c.chroma) {
+            fitted.record.chroma = chroma::plan(&scene, opts.work_side);
+            if let Some(map) = &fitted.record.chroma {
+                fitted.colors = chroma::apply(map, &scene.gaussians.positions, &fitted.colors);
+            }
+        }
     }
     let tone = plan.as_ref().map(|p| &p.curve);
     let bytes = rewrite(

@@ -24,12 +24,21 @@ pub const ENHANCER_VERSION_TONED: u8 = 3;
 /// as in layout 3 plus bit 2 (always set), a 4-byte [`GainMap`] record after the others
 /// and an eighth block, the gains.
 pub const ENHANCER_VERSION_GAINED: u8 = 4;
-/// Byte 3 of layouts 3 and 4: a denoise record follows.
+/// `gENH` layout of an enhancer with a chroma map after the mixture and any gain map
+/// (spec §7.2.4): byte 3 as in layout 4 plus bit 3 (always set; bit 2 may be clear), a
+/// 4-byte [`ChromaMap`] record after the others and a block of scales after the others.
+pub const ENHANCER_VERSION_CHROMA: u8 = 5;
+/// Byte 3 of layouts 3 to 5: a denoise record follows.
 pub const RECORD_DENOISE: u8 = 1;
-/// Byte 3 of layouts 3 and 4: a tone record follows (after the denoise record, if any).
+/// Byte 3 of layouts 3 to 5: a tone record follows (after the denoise record, if any).
 pub const RECORD_TONE: u8 = 2;
-/// Byte 3 of layout 4: a gain record follows the others, and block 7 holds the gains.
+/// Byte 3 of layouts 4 and 5: a gain record follows the others, and block 7 holds the gains.
 pub const RECORD_GAIN: u8 = 4;
+/// Byte 3 of layout 5: a chroma record follows the others, and the last block holds
+/// the scales.
+pub const RECORD_CHROMA: u8 = 8;
+/// Bytes of the chroma record of layout 5.
+pub const CHROMA_LEN: usize = 4;
 /// Bytes of the gain record of layout 4.
 pub const GAIN_LEN: usize = 4;
 /// Largest gain a gain map may hold (spec §7.2.3).
@@ -113,6 +122,18 @@ pub struct GainMap {
     pub gains: Attribute,
 }
 
+/// The chroma map that runs after the mixture and any gain map (spec §7.2.4):
+/// `width × height` scales in `[0, 1]` over the image, bilinearly interpolated at each
+/// Gaussian's centre, by which the colour's distance from its own grey is multiplied.
+/// What the numbers do is `gsi_enhance::enhance::chroma`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ChromaMap {
+    pub width: u16,
+    pub height: u16,
+    /// The scales, row by row, one component each, every one in `[0, 1]`.
+    pub scales: Attribute,
+}
+
 /// A `gENH` chunk: the mixture of colour operators and the weight map that mixes them.
 ///
 /// Every learned number is stored quantized (as an [`Attribute`] of one component, the
@@ -139,8 +160,10 @@ pub struct EnhancerRecord {
     pub denoise: Option<Denoise>,
     /// Tone curve applied after the mixture (layouts 3 and 4), if any.
     pub tone: Option<Tone>,
-    /// Gain map applied after the mixture, before any tone curve (layout 4), if any.
+    /// Gain map applied after the mixture, before any tone curve (layouts 4 and 5), if any.
     pub gain: Option<GainMap>,
+    /// Chroma map applied after the gain map, before any tone curve (layout 5), if any.
+    pub chroma: Option<ChromaMap>,
 }
 
 /// Number of values in each of the six tensors of one operator.
@@ -160,11 +183,13 @@ impl EnhancerRecord {
         let bit = |present: bool, b: u8| if present { b } else { 0 };
         let records = bit(self.denoise.is_some(), RECORD_DENOISE)
             | bit(self.tone.is_some(), RECORD_TONE)
-            | bit(self.gain.is_some(), RECORD_GAIN);
+            | bit(self.gain.is_some(), RECORD_GAIN)
+            | bit(self.chroma.is_some(), RECORD_CHROMA);
         // The lowest layout that holds what is stored (spec §7.2).
         let (version, records) = match records {
             0 => (ENHANCER_VERSION, 0),
             RECORD_DENOISE => (ENHANCER_VERSION_DENOISED, 0),
+            r if r & RECORD_CHROMA != 0 => (ENHANCER_VERSION_CHROMA, r),
             r if r & RECORD_GAIN == 0 => (ENHANCER_VERSION_TONED, r),
             r => (ENHANCER_VERSION_GAINED, r),
         };
@@ -194,8 +219,17 @@ impl EnhancerRecord {
             out.write_u16::<BigEndian>(g.width)?;
             out.write_u16::<BigEndian>(g.height)?;
         }
+        if let Some(c) = &self.chroma {
+            out.write_u16::<BigEndian>(c.width)?;
+            out.write_u16::<BigEndian>(c.height)?;
+        }
         let gains = self.gain.as_ref().map(|g| &g.gains);
-        for a in std::iter::once(&self.map).chain(&self.tensors).chain(gains) {
+        let scales = self.chroma.as_ref().map(|c| &c.scales);
+        for a in std::iter::once(&self.map)
+            .chain(&self.tensors)
+            .chain(gains)
+            .chain(scales)
+        {
             let p = a.to_payload(zstd_level)?;
             out.write_u32::<BigEndian>(p.len() as u32)?;
             out.extend_from_slice(&p);
@@ -216,6 +250,9 @@ impl EnhancerRecord {
         }
         if let Some(g) = &self.gain {
             check_gain(g)?;
+        }
+        if let Some(c) = &self.chroma {
+            check_chroma(c)?;
         }
         for (a, n) in std::iter::once(&self.map)
             .chain(&self.tensors)
@@ -257,11 +294,18 @@ impl EnhancerRecord {
             {
                 r
             }
+            (ENHANCER_VERSION_CHROMA, r)
+                if r & !(RECORD_DENOISE | RECORD_TONE | RECORD_GAIN | RECORD_CHROMA) == 0
+                    && r & RECORD_CHROMA != 0 =>
+            {
+                r
+            }
             (
                 ENHANCER_VERSION
                 | ENHANCER_VERSION_DENOISED
                 | ENHANCER_VERSION_TONED
-                | ENHANCER_VERSION_GAINED,
+                | ENHANCER_VERSION_GAINED
+                | ENHANCER_VERSION_CHROMA,
                 r,
             ) => return Err(invalid(format!("gENH layout {}: byte 3 is {r:#04x}", p[0]))),
             (v, _) => {
@@ -269,20 +313,22 @@ impl EnhancerRecord {
                     ErrorKind::UnsupportedVersion,
                     format!(
                         "gENH layout {v}, this decoder reads {ENHANCER_VERSION} to \
-                         {ENHANCER_VERSION_GAINED}"
+                         {ENHANCER_VERSION_CHROMA}"
                     ),
                 ))
             }
         };
-        let (has_denoise, has_tone, has_gain) = (
+        let (has_denoise, has_tone, has_gain, has_chroma) = (
             records & RECORD_DENOISE != 0,
             records & RECORD_TONE != 0,
             records & RECORD_GAIN != 0,
+            records & RECORD_CHROMA != 0,
         );
         let denoise_at = ENHANCER_FIXED_LEN;
         let tone_at = denoise_at + if has_denoise { DENOISE_LEN } else { 0 };
         let gain_at = tone_at + if has_tone { TONE_LEN } else { 0 };
-        let blocks_at = gain_at + if has_gain { GAIN_LEN } else { 0 };
+        let chroma_at = gain_at + if has_gain { GAIN_LEN } else { 0 };
+        let blocks_at = chroma_at + if has_chroma { CHROMA_LEN } else { 0 };
         if p.len() < blocks_at {
             return Err(Error::new(
                 ErrorKind::BadChunkLength,
@@ -334,23 +380,31 @@ impl EnhancerRecord {
             None
         };
 
-        let gain_shape = has_gain.then(|| {
+        let shape_at = |at: usize| {
             (
-                BigEndian::read_u16(&p[gain_at..gain_at + 2]),
-                BigEndian::read_u16(&p[gain_at + 2..gain_at + 4]),
+                BigEndian::read_u16(&p[at..at + 2]),
+                BigEndian::read_u16(&p[at + 2..at + 4]),
             )
-        });
+        };
+        let gain_shape = has_gain.then(|| shape_at(gain_at));
         if let Some((w, h)) = gain_shape {
-            check_gain_shape(w, h)?;
+            check_map_shape(w, h, "gain")?;
         }
-        let gain_count = gain_shape.map(|(w, h)| u64::from(w) * u64::from(h));
+        let chroma_shape = has_chroma.then(|| shape_at(chroma_at));
+        if let Some((w, h)) = chroma_shape {
+            check_map_shape(w, h, "chroma")?;
+        }
+        let cells = |(w, h): (u16, u16)| u64::from(w) * u64::from(h);
+        let gain_count = gain_shape.map(cells);
+        let chroma_count = chroma_shape.map(cells);
 
         let mut budget = AllocBudget::new(limits);
         let mut rest = &p[blocks_at..];
-        let mut blocks = Vec::with_capacity(8);
+        let mut blocks = Vec::with_capacity(9);
         let all = counts(experts, hidden, map_width, map_height)
             .into_iter()
-            .chain(gain_count);
+            .chain(gain_count)
+            .chain(chroma_count);
         for (b, n) in all.enumerate() {
             if rest.len() < 4 {
                 return Err(Error::new(
@@ -385,17 +439,30 @@ impl EnhancerRecord {
         let mut blocks = blocks.into_iter();
         let map = blocks.next().expect("seven blocks");
         let tensors = std::array::from_fn(|_| blocks.next().expect("seven blocks"));
-        let gain = match (gain_shape, blocks.next()) {
-            (Some((width, height)), Some(gains)) => {
+        // One block per map the records byte names, in the order of the records.
+        let gain = match gain_shape {
+            Some((width, height)) => {
                 let g = GainMap {
                     width,
                     height,
-                    gains,
+                    gains: blocks.next().expect("a block per count"),
                 };
                 check_gain(&g)?;
                 Some(g)
             }
-            _ => None,
+            None => None,
+        };
+        let chroma = match chroma_shape {
+            Some((width, height)) => {
+                let c = ChromaMap {
+                    width,
+                    height,
+                    scales: blocks.next().expect("a block per count"),
+                };
+                check_chroma(&c)?;
+                Some(c)
+            }
+            None => None,
         };
         Ok(EnhancerRecord {
             experts,
@@ -409,6 +476,7 @@ impl EnhancerRecord {
             denoise,
             tone,
             gain,
+            chroma,
         })
     }
 }
@@ -512,13 +580,41 @@ fn check_tone(t: &Tone) -> Result<()> {
     Ok(())
 }
 
-fn check_gain_shape(width: u16, height: u16) -> Result<()> {
+/// Spec §7.2.3 and §7.2.4: a map's sides in `1..=1024`; `what` names the map.
+fn check_map_shape(width: u16, height: u16, what: &str) -> Result<()> {
     for side in [width, height] {
         if !(1..=MAX_MAP_SIDE).contains(&side) {
             return Err(invalid(format!(
-                "gain map side {side}, allowed 1..={MAX_MAP_SIDE}"
+                "{what} map side {side}, allowed 1..={MAX_MAP_SIDE}"
             )));
         }
+    }
+    Ok(())
+}
+
+/// A map's block: one component, `width·height` values; `what` names the map.
+fn check_map_block(a: &Attribute, width: u16, height: u16, what: &str) -> Result<()> {
+    check_map_shape(width, height, what)?;
+    let n = usize::from(width) * usize::from(height);
+    if a.components() != 1 || a.count() != n {
+        return Err(invalid(format!(
+            "{what} map block of {} values, expected {n}",
+            a.count()
+        )));
+    }
+    Ok(())
+}
+
+/// Spec §7.2.4: sides in `1..=1024`, `width·height` scales, each in `[0, 1]`, checked by
+/// the block's quantizer's ends as for the gains.
+fn check_chroma(c: &ChromaMap) -> Result<()> {
+    check_map_block(&c.scales, c.width, c.height, "chroma")?;
+    let q = &c.scales.quantizers[0];
+    if !(q.min >= 0.0 && q.max <= 1.0 && q.min <= q.max) {
+        return Err(invalid(format!(
+            "chroma map range [{}, {}], allowed [0, 1]",
+            q.min, q.max
+        )));
     }
     Ok(())
 }
@@ -526,14 +622,7 @@ fn check_gain_shape(width: u16, height: u16) -> Result<()> {
 /// Spec §7.2.3: sides in `1..=1024`, `width·height` gains, each in `(0, 64]`. The gains
 /// of a block lie between its quantizer's ends, so checking the ends checks them all.
 fn check_gain(g: &GainMap) -> Result<()> {
-    check_gain_shape(g.width, g.height)?;
-    let n = usize::from(g.width) * usize::from(g.height);
-    if g.gains.components() != 1 || g.gains.count() != n {
-        return Err(invalid(format!(
-            "gain map block of {} values, expected {n}",
-            g.gains.count()
-        )));
-    }
+    check_map_block(&g.gains, g.width, g.height, "gain")?;
     let q = &g.gains.quantizers[0];
     if !(q.min > 0.0 && q.max <= MAX_GAIN && q.min <= q.max) {
         return Err(invalid(format!(

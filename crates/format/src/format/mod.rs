@@ -23,7 +23,7 @@ mod writer;
 pub use chunk::{chunk_crc, ChunkInfo, ChunkType, RawChunk, SIGNATURE};
 pub use edit::ChunkedFile;
 pub use enhancer::{
-    tensor_sizes, Denoise, EnhancerRecord, FitSettings, GainMap, OriginalColors, Tone,
+    tensor_sizes, ChromaMap, Denoise, EnhancerRecord, FitSettings, GainMap, OriginalColors, Tone,
     MAX_DENOISE_PASSES, MAX_EXPERTS, MAX_GAIN, MAX_HIDDEN, MAX_TONE_EXPONENT, MAX_TONE_PASSES,
     TENSORS,
 };
