@@ -233,8 +233,10 @@ fn lamp_file(seed: u64, blend: Blend) -> Vec<u8> {
     to_bytes(&Records::from_scene(&scene, BITS), &WriteOptions::default()).unwrap()
 }
 
-/// Where a lamp holds the curve back, the shadows are lifted by a gain map (gENH layout
-/// 4); the file applies to itself and to its original exactly, and reverts exactly.
+/// Where a lamp holds the curve back, the shadows are lifted by a gain map; where they
+/// were within a few noise levels of black, a chroma map follows it (gENH layout 5, both
+/// records bits); the file applies to itself and to its original exactly, and reverts
+/// exactly.
 #[test]
 fn a_lamp_lit_room_gets_a_gain_map_that_applies_and_reverts_exactly() {
     let lim = Limits::default();
@@ -250,8 +252,9 @@ fn a_lamp_lit_room_gets_a_gain_map_that_applies_and_reverts_exactly() {
         );
         let after = parse(&done.bytes);
         let layout = payload(&after, ChunkType::ENHANCER).unwrap();
-        assert_eq!(layout[0], 4, "{blend:?}: layout 4");
-        assert_ne!(layout[3] & 4, 0, "{blend:?}: records bit 2");
+        assert!(done.fitted.record.chroma.is_some(), "{blend:?}: a chroma map");
+        assert_eq!(layout[0], 5, "{blend:?}: layout 5");
+        assert_eq!(layout[3] & 12, 12, "{blend:?}: records bits 2 and 3");
         assert_sane(&done.bytes);
         // Nothing shown is clipped (the shoulder stays below 250).
         let scene = after.file.records.to_scene();
