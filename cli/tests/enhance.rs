@@ -252,7 +252,10 @@ fn a_lamp_lit_room_gets_a_gain_map_that_applies_and_reverts_exactly() {
         );
         let after = parse(&done.bytes);
         let layout = payload(&after, ChunkType::ENHANCER).unwrap();
-        assert!(done.fitted.record.chroma.is_some(), "{blend:?}: a chroma map");
+        assert!(
+            done.fitted.record.chroma.is_some(),
+            "{blend:?}: a chroma map"
+        );
         assert_eq!(layout[0], 5, "{blend:?}: layout 5");
         assert_eq!(layout[3] & 12, 12, "{blend:?}: records bits 2 and 3");
         assert_sane(&done.bytes);
