@@ -3,7 +3,8 @@
 //! applying a stored enhancer to every colour (`--apply-from`), the denoising that
 //! comes before the mixture (neighbour search and two passes), the per-Gaussian tone
 //! curve of older files (applied as stored), stage 2's low-light decision (`assess`) and
-//! its choice of tone curve and gain map (`curve-plan`); and the zero-shot loss alone at
+//! its choice of tone curve and gain map (`curve-plan`) and of chroma map
+//! (`chroma-plan`, `chroma-apply`); and the zero-shot loss alone at
 //! the working size (`loss/256x171`).
 
 use criterion::{criterion_group, criterion_main, Criterion};
@@ -74,6 +75,24 @@ fn enhance_iteration(c: &mut Criterion) {
                     target,
                     &curve,
                     opts.work_side,
+                ))
+            })
+        });
+        group.bench_function(format!("{}/chroma-plan/4k", blend.name()), |b| {
+            b.iter(|| black_box(gsi::enhance::chroma::plan(&scene, opts.work_side)))
+        });
+        let scales: Vec<[f32; 1]> = (0..16 * 11).map(|i| [(i % 7) as f32 / 6.0]).collect();
+        let chroma = gsi::format::ChromaMap {
+            width: 16,
+            height: 11,
+            scales: gsi::format::Attribute::fit(&scales, [4]),
+        };
+        group.bench_function(format!("{}/chroma-apply/4k", blend.name()), |b| {
+            b.iter(|| {
+                black_box(gsi::enhance::chroma::apply(
+                    &chroma,
+                    &g.positions,
+                    &g.colors,
                 ))
             })
         });

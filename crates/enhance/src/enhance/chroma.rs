@@ -17,6 +17,8 @@ use gsi_format::contract::COLOR_MAX;
 use gsi_format::format::ChromaMap;
 
 /// Rec. 601 luma weights, in binary32 as spec §7.2.4 writes them: a colour's own grey.
+/// The same numbers as `gsi_metrics`' `BT601_F32`, kept here because applying a stored
+/// map is a decoder's work, which builds without the metrics.
 pub const LUMA: [f32; 3] = [0.299, 0.587, 0.114];
 
 /// `colors` (of Gaussians centred at `positions`) moved towards their own grey by the
@@ -41,8 +43,8 @@ pub use plan::{plan, scale_at, CELL, KEEP, NOISE, SCALE_BITS};
 
 #[cfg(feature = "encode")]
 mod plan {
+    use super::super::loss::display_luma;
     use super::super::working::{work_size, working_image};
-    use super::LUMA;
     use gsi_format::format::{Attribute, ChromaMap};
     use gsi_format::model::Scene;
 
@@ -83,13 +85,8 @@ mod plan {
         let mut count = vec![0u32; mw * mh];
         for (i, px) in img.chunks_exact(3).enumerate() {
             let (x, y) = (i % w, i / w);
-            let luma: f32 = px
-                .iter()
-                .zip(LUMA)
-                .map(|(&v, k)| k * if v >= 0.0 { v.min(1.0) } else { 0.0 })
-                .sum();
             let c = (y / cell) * mw + x / cell;
-            sum[c] += f64::from(luma) * 255.0;
+            sum[c] += f64::from(display_luma(px)) * 255.0;
             count[c] += 1;
         }
         let scales: Vec<[f32; 1]> = sum
@@ -133,6 +130,8 @@ mod tests {
             LUMA.map(f32::to_bits),
             [0x3e99_1687, 0x3f16_45a2, 0x3de9_78d5]
         );
+        #[cfg(feature = "encode")]
+        assert_eq!(LUMA, gsi_metrics::metrics::BT601_F32);
     }
 
     #[test]
