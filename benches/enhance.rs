@@ -78,8 +78,10 @@ fn enhance_iteration(c: &mut Criterion) {
                 ))
             })
         });
+        let low = gsi::enhance::working::working_image(&scene, opts.work_side);
+        let (lw, lh) = gsi::enhance::working::work_size(scene.width, scene.height, opts.work_side);
         group.bench_function(format!("{}/chroma-plan/4k", blend.name()), |b| {
-            b.iter(|| black_box(gsi::enhance::chroma::plan(&scene, opts.work_side)))
+            b.iter(|| black_box(gsi::enhance::chroma::plan(&low, lw, lh)))
         });
         let scales: Vec<[f32; 1]> = (0..16 * 11).map(|i| [(i % 7) as f32 / 6.0]).collect();
         let chroma = gsi::format::ChromaMap {

@@ -549,6 +549,21 @@ fn genh_layout_3_reads_writes_and_refuses_as_specified() {
     assert!(format::EnhancerRecord::parse(&as_one, &Limits::default()).is_err());
 }
 
+/// How `gENH` bytes `good` are refused once their last map block's range reads
+/// `[lo, hi]`: the block's preamble is found by its `max`, `marker`, the last such f32.
+fn last_block_range_refused(good: &[u8], marker: f32, lo: f32, hi: f32) -> ErrorKind {
+    let at = good
+        .windows(4)
+        .rposition(|w| w == marker.to_be_bytes())
+        .expect("the map block's max");
+    let mut bad = good.to_vec();
+    bad[at - 4..at].copy_from_slice(&lo.to_be_bytes());
+    bad[at..at + 4].copy_from_slice(&hi.to_be_bytes());
+    format::EnhancerRecord::parse(&bad, &Limits::default())
+        .expect_err("refused")
+        .kind()
+}
+
 /// §7.2 layout 4: a gain record (bit 2 of byte 3) after the other records and an eighth
 /// block of gains; every field outside its range is refused where the chunk is read.
 #[test]
@@ -597,19 +612,7 @@ fn genh_layout_4_reads_writes_and_refuses_as_specified() {
         assert!(r.to_payload(19).is_err(), "[{lo}, {hi}] written");
         let mut ok = record.clone();
         ok.gain.as_mut().unwrap().gains.quantizers[0].max = 2.0;
-        let good = ok.to_payload(19).unwrap();
-        // Write the bad range into the good bytes' gain block preamble, found by the
-        // good range's bytes.
-        let at = good
-            .windows(4)
-            .rposition(|w| w == 2.0f32.to_be_bytes())
-            .expect("the gain block's max");
-        let mut bad = good.clone();
-        bad[at - 4..at].copy_from_slice(&lo.to_be_bytes());
-        bad[at..at + 4].copy_from_slice(&hi.to_be_bytes());
-        let kind = format::EnhancerRecord::parse(&bad, &Limits::default())
-            .expect_err("refused")
-            .kind();
+        let kind = last_block_range_refused(&ok.to_payload(19).unwrap(), 2.0, lo, hi);
         assert_eq!(kind, ErrorKind::InvalidValue, "[{lo}, {hi}]");
     }
 }
@@ -669,17 +672,7 @@ fn genh_layout_5_reads_writes_and_refuses_as_specified() {
         assert!(r.to_payload(19).is_err(), "[{lo}, {hi}] written");
         let mut ok = alone.clone();
         ok.chroma.as_mut().unwrap().scales.quantizers[0].max = 0.75;
-        let good = ok.to_payload(19).unwrap();
-        let at = good
-            .windows(4)
-            .rposition(|w| w == 0.75f32.to_be_bytes())
-            .expect("the chroma block's max");
-        let mut bad = good.clone();
-        bad[at - 4..at].copy_from_slice(&lo.to_be_bytes());
-        bad[at..at + 4].copy_from_slice(&hi.to_be_bytes());
-        let kind = format::EnhancerRecord::parse(&bad, &Limits::default())
-            .expect_err("refused")
-            .kind();
+        let kind = last_block_range_refused(&ok.to_payload(19).unwrap(), 0.75, lo, hi);
         assert_eq!(kind, ErrorKind::InvalidValue, "[{lo}, {hi}]");
     }
 }

@@ -12,7 +12,7 @@
 //! is: moving a colour towards its grey is linear, so in `sum` blending the blended colour
 //! moves by the scale wherever it is nearly constant across a footprint.
 
-use super::gain::at;
+use super::gain::at_centres;
 use gsi_format::contract::COLOR_MAX;
 use gsi_format::format::ChromaMap;
 
@@ -25,13 +25,10 @@ pub const LUMA: [f32; 3] = [0.299, 0.587, 0.114];
 /// map's scale at each centre, exactly as spec §7.2.4: `y = (0.299·c0 + 0.587·c1) +
 /// 0.114·c2`, then `y + s·(c − y)` per channel, clamped to `±COLOR_MAX`.
 pub fn apply(map: &ChromaMap, positions: &[[f32; 2]], colors: &[[f32; 3]]) -> Vec<[f32; 3]> {
-    let scales: Vec<f32> = map.scales.values::<1>().into_iter().map(|[s]| s).collect();
-    let (w, h) = (usize::from(map.width), usize::from(map.height));
-    positions
-        .iter()
+    at_centres(&map.scales, map.width, map.height, positions)
+        .into_iter()
         .zip(colors)
-        .map(|(&p, c)| {
-            let s = at(&scales, w, h, p);
+        .map(|(s, c)| {
             let y = (LUMA[0] * c[0] + LUMA[1] * c[1]) + LUMA[2] * c[2];
             c.map(|x| (y + s * (x - y)).clamp(-COLOR_MAX, COLOR_MAX))
         })
@@ -44,9 +41,7 @@ pub use plan::{plan, scale_at, CELL, KEEP, NOISE, SCALE_BITS};
 #[cfg(feature = "encode")]
 mod plan {
     use super::super::loss::display_luma;
-    use super::super::working::{work_size, working_image};
     use gsi_format::format::{Attribute, ChromaMap};
-    use gsi_format::model::Scene;
 
     /// Noise of a dark photograph's luma, in 8-bit steps: the median over LOL `val30`'s
     /// 30 low images and eval15's 15 (1.31 and 1.32 by Immerkær's estimator), which the
@@ -72,13 +67,12 @@ mod plan {
         (l * l / (l * l + sigma * sigma)) as f32
     }
 
-    /// The chroma map of `scene` (the low image's Gaussians, before any enhancement), on
-    /// the working image of long side `work_side` in cells of [`CELL`] pixels; `None`
-    /// where no cell was lit within a few noise levels of black.
-    pub fn plan(scene: &Scene, work_side: u32) -> Option<ChromaMap> {
-        let img = working_image(scene, work_side);
-        let (w, h) = work_size(scene.width, scene.height, work_side);
-        let (w, h) = (w as usize, h as usize);
+    /// The chroma map of `img`, the low image's working image (`width × height`
+    /// blended values, [`super::super::working::working_image`], before any
+    /// enhancement), in cells of [`CELL`] pixels; `None` where no cell was lit within a
+    /// few noise levels of black.
+    pub fn plan(img: &[f32], width: u32, height: u32) -> Option<ChromaMap> {
+        let (w, h) = (width as usize, height as usize);
         let cell = CELL as usize;
         let (mw, mh) = (w.div_ceil(cell), h.div_ceil(cell));
         let mut sum = vec![0.0f64; mw * mh];
@@ -172,7 +166,14 @@ mod tests {
     #[cfg(feature = "encode")]
     mod planning {
         use super::super::*;
+        use gsi_format::format::ChromaMap;
         use gsi_format::model::{Blend, CovParam, GaussianSet, Scene};
+
+        /// [`plan`] on `scene`'s working image of long side `side`.
+        fn plan_of(scene: &Scene, side: u32) -> Option<ChromaMap> {
+            let (w, h) = crate::enhance::working::work_size(scene.width, scene.height, side);
+            plan(&crate::enhance::working::working_image(scene, side), w, h)
+        }
 
         /// A grid of round Gaussians of one colour over a `w × h` image.
         fn flat(c: [f32; 3]) -> Scene {
@@ -198,7 +199,7 @@ mod tests {
 
         #[test]
         fn a_lit_scene_gets_no_map() {
-            assert!(plan(&flat([0.3, 0.25, 0.2]), 256).is_none());
+            assert!(plan_of(&flat([0.3, 0.25, 0.2]), 256).is_none());
         }
 
         #[test]
@@ -218,7 +219,7 @@ mod tests {
         #[test]
         fn a_scene_near_black_gets_a_map_and_a_darker_one_a_lower_scale() {
             let mid = |c: [f32; 3]| {
-                let map = plan(&flat(c), 256).expect("a map");
+                let map = plan_of(&flat(c), 256).expect("a map");
                 let s = map.scales.values::<1>();
                 s[s.len() / 2 + usize::from(map.width) / 2][0]
             };
@@ -228,11 +229,11 @@ mod tests {
 
         #[test]
         fn black_and_empty_scenes_give_finite_scales() {
-            let black = plan(&flat([0.0; 3]), 256).expect("a map");
+            let black = plan_of(&flat([0.0; 3]), 256).expect("a map");
             assert!(black.scales.values::<1>().iter().all(|[s]| *s == 0.0));
             let mut empty = flat([0.0; 3]);
             empty.gaussians = GaussianSet::default();
-            let m = plan(&empty, 256).expect("a map of a black image");
+            let m = plan_of(&empty, 256).expect("a map of a black image");
             assert!(m.scales.values::<1>().iter().all(|[s]| s.is_finite()));
         }
     }

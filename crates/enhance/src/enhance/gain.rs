@@ -8,26 +8,30 @@
 
 use super::mixture::tap;
 use gsi_format::contract::COLOR_MAX;
-use gsi_format::format::GainMap;
+use gsi_format::format::{Attribute, GainMap};
 
 /// `colors` (of Gaussians centred at `positions`) times the map's gain at each centre,
 /// clamped to `±COLOR_MAX`, exactly as spec §7.2.3.
 pub fn apply(map: &GainMap, positions: &[[f32; 2]], colors: &[[f32; 3]]) -> Vec<[f32; 3]> {
-    let gains: Vec<f32> = map.gains.values::<1>().into_iter().map(|[g]| g).collect();
-    let (w, h) = (usize::from(map.width), usize::from(map.height));
-    positions
-        .iter()
+    at_centres(&map.gains, map.width, map.height, positions)
+        .into_iter()
         .zip(colors)
-        .map(|(&p, c)| {
-            let g = at(&gains, w, h, p);
-            c.map(|x| (x * g).clamp(-COLOR_MAX, COLOR_MAX))
-        })
+        .map(|(g, c)| c.map(|x| (x * g).clamp(-COLOR_MAX, COLOR_MAX)))
         .collect()
 }
 
-/// The bilinear gain of a `w × h` map at normalized position `p` (the tap of spec §7.2
+/// The value of a one-component map of `width × height` cells (row by row) at each
+/// centre of `positions`, bilinearly: what the gain map and the chroma map (spec
+/// §7.2.3, §7.2.4) read per Gaussian.
+pub fn at_centres(map: &Attribute, width: u16, height: u16, positions: &[[f32; 2]]) -> Vec<f32> {
+    let values: Vec<f32> = map.values::<1>().into_iter().map(|[v]| v).collect();
+    let (w, h) = (usize::from(width), usize::from(height));
+    positions.iter().map(|&p| at(&values, w, h, p)).collect()
+}
+
+/// The bilinear value of a `w × h` map at normalized position `p` (the tap of spec §7.2
 /// step 1, summed from 0 in its order).
-pub fn at(gains: &[f32], w: usize, h: usize, p: [f32; 2]) -> f32 {
+fn at(gains: &[f32], w: usize, h: usize, p: [f32; 2]) -> f32 {
     let t = tap(w, h, p);
     let mut g = 0.0f32;
     for (&cell, &b) in t.cells.iter().zip(&t.weights) {

@@ -248,10 +248,12 @@ pub fn enhance(
     let mut fitted = fit::fit(&scene, fit_opts, &features::FeatureBank, device, progress);
     fitted.record.denoise = stored_denoise;
     fitted.denoise_skipped = skipped;
-    let plan = opts.curve.map(|c| {
-        let target = opts
-            .exposure
-            .target(&fit::working_image(&scene, opts.work_side));
+    // The low image at the working size: the exposure's target and the chroma map read it.
+    let low = opts
+        .curve
+        .map(|_| fit::working_image(&scene, opts.work_side));
+    let plan = opts.curve.zip(low.as_deref()).map(|(c, low)| {
+        let target = opts.exposure.target(low);
         curve::plan(&scene, &fitted.colors, target, &c, opts.work_side)
     });
     let mut shown_luma = fitted.mean_luma.1;
@@ -260,8 +262,12 @@ pub fn enhance(
         fitted.colors = p.colors.clone();
         shown_luma = p.mean_luma;
         // After the gain map, in the order of spec §7.2, from the low image's own levels.
-        if opts.curve.is_some_and(|c| c.chroma) {
-            fitted.record.chroma = chroma::plan(&scene, opts.work_side);
+        if let Some(low) = low
+            .as_deref()
+            .filter(|_| opts.curve.is_some_and(|c| c.chroma))
+        {
+            let (w, h) = working::work_size(scene.width, scene.height, opts.work_side);
+            fitted.record.chroma = chroma::plan(low, w, h);
             if let Some(map) = &fitted.record.chroma {
                 fitted.colors = chroma::apply(map, &scene.gaussians.positions, &fitted.colors);
             }
