@@ -1,8 +1,8 @@
 #!/bin/sh
 # Prepare `.gpukit/`, what a machine with a GPU and no network or Rust toolchain needs to
 # measure the GPU figures of BENCHMARKS.md and to run the GPU tests there: the
-# `gpu_bench` example, the GPU test binaries (`cli/tests/gpu.rs` and the library's unit
-# tests of its GPU twins) and the `gsi` binary they call, all built here (x86-64) and
+# `gpu_bench` example, the GPU test binaries (`cli/tests/gpu.rs` and the unit tests of
+# the device crate and of the stages' GPU twins) and the `gsi` binary they call, all built here (x86-64) and
 # stripped, the Kodak images, and the Vulkan loader package. Then, with the `device` tool
 # of this workplace:
 #
@@ -28,10 +28,14 @@ run_kit() {
     export GSI_REQUIRE_GPU=1 GSI_REPO="$PWD" GSI_BIN="$PWD/$kit/gsi"
     export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-$(mktemp -d)}"
     status=0
-    for t in tests-gpu tests-lib; do
-        filter=""
-        # The library's unit tests of its GPU twins and of what they share.
-        [ "$t" = tests-lib ] && filter="gpu resident"
+    # The CLI's GPU tests, then each crate's unit tests of its GPU twins (filtered to
+    # them: the rest of those binaries are CPU tests that CI runs).
+    for t in tests-gpu tests-device tests-fit tests-enhance; do
+        case "$t" in
+        tests-fit) filter="resident" ;;
+        tests-enhance) filter="gpu" ;;
+        *) filter="" ;;
+        esac
         echo "==> $t $filter"
         # shellcheck disable=SC2086
         if ! "$kit/$t" $filter --test-threads=1 --nocapture >"$out/$t.log" 2>&1; then
@@ -43,7 +47,7 @@ run_kit() {
     done
     echo "==> margins"
     grep -h -E '^(margin|adapter):' "$out"/tests-*.log | sort | uniq || true
-    grep -h -E 'relative error' "$out"/tests-lib.log || true
+    grep -h -E 'relative error' "$out"/tests-*.log || true
     echo "==> gpu_bench ${GPU_BENCH_ARGS:---limit 4}"
     # shellcheck disable=SC2086
     "$kit/gpu_bench" --kodak "$kit/kodak" --out "$out/gpu.json" ${GPU_BENCH_ARGS:---limit 4} || status=1
@@ -84,9 +88,22 @@ exe_of() {
     grep -E '"profile":\{[^}]*"test":true' | grep '"executable":"/' | sed 's/.*"executable":"\([^"]*\)".*/\1/' | head -n 1
 }
 cp "$(cargo test --release --no-run -p gsi-cli --test gpu --message-format=json 2>/dev/null | exe_of)" "$kit/tests-gpu"
-cp "$(cargo test --release --no-run -p gsi --lib --features encode,gpu --message-format=json 2>/dev/null | exe_of)" "$kit/tests-lib"
-strip "$kit/gpu_bench" "$kit/gsi" "$kit/tests-gpu" "$kit/tests-lib"
-cp ../shared/data/kodak/*.png "$kit/kodak/"
+test_bin() { # crate, features, name in the kit
+    cp "$(cargo test --release --no-run -p "$1" --lib --features "$2" --message-format=json 2>/dev/null | exe_of)" "$kit/$3"
+    strip "$kit/$3"
+}
+test_bin gsi-gpu gpu,encode,test-support tests-device
+test_bin gsi-fit gpu tests-fit
+test_bin gsi-enhance encode,gpu tests-enhance
+strip "$kit/gpu_bench" "$kit/gsi" "$kit/tests-gpu"
+# The images the benchmark's default `--limit 4` reads (the kit must stay under the device
+# tool's 64 MiB); KIT_KODAK=all brings all 24.
+rm -f "$kit"/kodak/*.png
+if [ "${KIT_KODAK:-}" = all ]; then
+    cp ../shared/data/kodak/*.png "$kit/kodak/"
+else
+    cp ../shared/data/kodak/kodim0[1-4].png "$kit/kodak/"
+fi
 o='-oAPT::Architecture=amd64 -oAPT::Architectures=amd64 -oDir::State::Lists=/tmp/gsi-apt'
 # shellcheck disable=SC2086
 apt-get $o update >/dev/null

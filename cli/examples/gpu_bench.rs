@@ -77,10 +77,13 @@ fn main() {
         let resident = GpuScene::new(&gpu, &scene, 768, 512).expect("upload");
         resident.draw(frames / 10 + 1).expect("GPU");
         resident.wait().expect("GPU");
-        let t = Instant::now();
-        resident.draw(frames).expect("GPU");
-        resident.wait().expect("GPU");
-        let fps = f64::from(frames) / t.elapsed().as_secs_f64();
+        let (fps, submit_us) = draw_rate(&resident, frames);
+        // The same frames with the first 64 Gaussians alone: what a frame costs whatever
+        // the scene (submission, a dozen dispatches and their barriers).
+        let floor = GpuScene::new(&gpu, &first(&scene, 64), 768, 512).expect("upload");
+        floor.draw(frames / 10 + 1).expect("GPU");
+        floor.wait().expect("GPU");
+        let (floor_fps, _) = draw_rate(&floor, frames);
         let calls = if quick { 2 } else { 50 };
         let t = Instant::now();
         for _ in 0..calls {
@@ -88,7 +91,7 @@ fn main() {
         }
         let per_call = t.elapsed().as_secs_f64() / f64::from(calls);
         println!(
-            "{} Gaussians at 768x512: {fps:.0} frames/s resident; Gpu::render {:.2} ms per call ({:.1} dB file)",
+            "{} Gaussians at 768x512: {fps:.0} frames/s resident ({submit_us:.0} us of CPU to submit a frame; 64 Gaussians: {floor_fps:.0} frames/s); Gpu::render {:.2} ms per call ({:.1} dB file)",
             scene.gaussians.len(),
             per_call * 1e3,
             encoded.psnr
@@ -96,6 +99,8 @@ fn main() {
         draw.push(json!({
             "gaussians": scene.gaussians.len(),
             "resident_fps": fps,
+            "submit_cpu_us_per_frame": submit_us,
+            "fps_first_64_gaussians": floor_fps,
             "render_call_ms": per_call * 1e3,
             "frames": frames,
         }));
@@ -180,4 +185,37 @@ fn commit() -> String {
         .and_then(|o| String::from_utf8(o.stdout).ok())
         .map(|s| s.trim().to_string())
         .unwrap_or_default()
+}
+
+/// Frames per second drawing `frames` frames resident, and the CPU time the submitting
+/// thread spent per frame, in microseconds (Linux's per-thread accounting; 0 elsewhere).
+fn draw_rate(scene: &GpuScene, frames: u32) -> (f64, f64) {
+    let cpu = thread_cpu_ns();
+    let t = Instant::now();
+    scene.draw(frames).expect("GPU");
+    let submitted = thread_cpu_ns();
+    scene.wait().expect("GPU");
+    let fps = f64::from(frames) / t.elapsed().as_secs_f64();
+    (fps, (submitted - cpu) as f64 / 1e3 / f64::from(frames))
+}
+
+/// Nanoseconds this thread has run, from `/proc/thread-self/schedstat`.
+fn thread_cpu_ns() -> u64 {
+    std::fs::read_to_string("/proc/thread-self/schedstat")
+        .ok()
+        .and_then(|s| s.split_whitespace().next()?.parse().ok())
+        .unwrap_or(0)
+}
+
+/// The scene with its first `n` Gaussians alone.
+fn first(scene: &gsi::model::Scene, n: usize) -> gsi::model::Scene {
+    let mut s = scene.clone();
+    let g = &mut s.gaussians;
+    g.positions.truncate(n);
+    g.cov.truncate(n);
+    g.colors.truncate(n);
+    if let Some(o) = &mut g.opacity {
+        o.truncate(n);
+    }
+    s
 }

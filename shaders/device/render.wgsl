@@ -8,6 +8,11 @@
 // from the CPU's `render::project` (`Gpu::render`), or from `fit_project.wgsl` and the
 // radix sort (the resident pipeline of `gpu::forward`).
 //
+// Every pixel of a tile reads the same Gaussians, so the workgroup fetches them together,
+// a batch of BATCH at a time, into workgroup memory (one global read per Gaussian and
+// tile instead of one per pixel), and every pixel then reads each from there. In `alpha`
+// blending the workgroup stops once no pixel of the tile is still accumulating.
+//
 // The contract constants (TILE, ALPHA_MIN, …) are prepended by the host, written from the
 // Rust constants (`gpu::contract`).
 
@@ -37,57 +42,104 @@ struct Params {
 // RGB per pixel of the band, row-major.
 @group(0) @binding(5) var<storage, read_write> out_rgb: array<f32>;
 
+// One Gaussian per invocation of the workgroup: 52 bytes each, 13 KiB in all (WebGPU
+// guarantees 16 KiB).
+const BATCH: u32 = TILE * TILE;
+var<workgroup> batch_box: array<vec4<u32>, BATCH>;
+var<workgroup> batch_centre_ab: array<vec4<f32>, BATCH>;
+var<workgroup> batch_c_opacity_rg: array<vec4<f32>, BATCH>;
+var<workgroup> batch_blue: array<f32, BATCH>;
+// The tile's list, [first, last).
+var<workgroup> list: vec2<u32>;
+// Pixels of the tile still accumulating, and its value as the workgroup last read it.
+var<workgroup> live: atomic<u32>;
+var<workgroup> live_read: u32;
+
 @compute @workgroup_size(16, 16, 1)
-fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>) {
+fn main(@builtin(workgroup_id) wg: vec3<u32>,
+        @builtin(local_invocation_id) lid: vec3<u32>,
+        @builtin(local_invocation_index) li: u32) {
     let i = wg.x * TILE + lid.x;
     let band_row = wg.y * TILE + lid.y;
     let j = params.tile_row0 * TILE + band_row;
-    if (i >= params.width || band_row >= params.rows || j >= params.height) {
-        return;
+    // Invocations past the image's edge still fetch their share of each batch.
+    let inside = i < params.width && band_row < params.rows && j < params.height;
+    if (li == 0u) {
+        let tile = wg.y * params.tiles_x + wg.x;
+        list = vec2<u32>(offsets[tile], offsets[tile + 1u]);
+        atomicStore(&live, 0u);
     }
-    let tile = wg.y * params.tiles_x + wg.x;
-    let first = offsets[tile];
-    let last = offsets[tile + 1u];
+    workgroupBarrier();
+    if (inside) {
+        atomicAdd(&live, 1u);
+    }
+    let range = workgroupUniformLoad(&list);
     let cx = f32(i) + 0.5;
     let cy = f32(j) + 0.5;
     var acc = vec3<f32>(0.0, 0.0, 0.0);
     var t = 1.0;
-    for (var k = first; k < last; k = k + 1u) {
-        let g = indices[k];
-        let b = boxes[g];
-        if (i < b.x || i > b.z || j < b.y || j > b.w) {
-            continue;
+    var accumulating = inside;
+    for (var base = range.x; base < range.y; base = base + BATCH) {
+        let k = base + li;
+        if (k < range.y) {
+            let g = indices[k];
+            batch_box[li] = boxes[g];
+            batch_centre_ab[li] = gaussians[3u * g];
+            batch_c_opacity_rg[li] = gaussians[3u * g + 1u];
+            batch_blue[li] = gaussians[3u * g + 2u].x;
         }
-        let p0 = gaussians[3u * g];
-        let p1 = gaussians[3u * g + 1u];
-        let p2 = gaussians[3u * g + 2u];
-        let dx = cx - p0.x;
-        let dy = cy - p0.y;
-        let power = -0.5 * (p0.z * dx * dx + p1.x * dy * dy) - p0.w * dx * dy;
-        if (power > 0.0) {
-            continue;
+        workgroupBarrier();
+        if (accumulating) {
+            let n = min(BATCH, range.y - base);
+            for (var s = 0u; s < n; s = s + 1u) {
+                let b = batch_box[s];
+                if (i < b.x || i > b.z || j < b.y || j > b.w) {
+                    continue;
+                }
+                let p0 = batch_centre_ab[s];
+                let p1 = batch_c_opacity_rg[s];
+                let dx = cx - p0.x;
+                let dy = cy - p0.y;
+                let power = -0.5 * (p0.z * dx * dx + p1.x * dy * dy) - p0.w * dx * dy;
+                if (power > 0.0) {
+                    continue;
+                }
+                var alpha = p1.y * spec_exp(power);
+                let color = vec3<f32>(p1.z, p1.w, batch_blue[s]);
+                if (params.blend == 0u) {
+                    if (alpha < ALPHA_MIN) {
+                        continue;
+                    }
+                    acc = acc + color * alpha;
+                } else {
+                    alpha = min(alpha, ALPHA_MAX);
+                    if (alpha < ALPHA_MIN) {
+                        continue;
+                    }
+                    acc = acc + color * alpha * t;
+                    t = t * (1.0 - alpha);
+                    if (t < TRANSMITTANCE_MIN) {
+                        accumulating = false;
+                        atomicSub(&live, 1u);
+                        break;
+                    }
+                }
+            }
         }
-        var alpha = p1.y * spec_exp(power);
-        let color = vec3<f32>(p1.z, p1.w, p2.x);
-        if (params.blend == 0u) {
-            if (alpha < ALPHA_MIN) {
-                continue;
-            }
-            acc = acc + color * alpha;
-        } else {
-            alpha = min(alpha, ALPHA_MAX);
-            if (alpha < ALPHA_MIN) {
-                continue;
-            }
-            acc = acc + color * alpha * t;
-            t = t * (1.0 - alpha);
-            if (t < TRANSMITTANCE_MIN) {
-                break;
-            }
+        // Every pixel is done with this batch before the next overwrites it, and every
+        // pixel that stopped has said so before the count is read.
+        workgroupBarrier();
+        if (li == 0u) {
+            live_read = atomicLoad(&live);
+        }
+        if (workgroupUniformLoad(&live_read) == 0u) {
+            break;
         }
     }
-    let o = 3u * (band_row * params.width + i);
-    out_rgb[o] = acc.x;
-    out_rgb[o + 1u] = acc.y;
-    out_rgb[o + 2u] = acc.z;
+    if (inside) {
+        let o = 3u * (band_row * params.width + i);
+        out_rgb[o] = acc.x;
+        out_rgb[o + 1u] = acc.y;
+        out_rgb[o + 2u] = acc.z;
+    }
 }
