@@ -1,11 +1,12 @@
 // Where each Gaussian's tile-list entries start: an exclusive prefix sum of `touched`
-// in stored order, and the total, which sizes the sort. Three entry points, so that the
+// in stored order, and the total, which sizes the sort. Two entry points, so that the
 // work spreads over one workgroup per block of GROUP * SCAN_PER Gaussians rather than
 // one workgroup for all (one SM of a hundred-plus):
 // - `blocks`: each workgroup sums its block into `block_sums`;
-// - `top`: one workgroup turns the block sums into each block's starting offset and
-//   writes the total;
-// - `apply`: each workgroup writes its Gaussians' offsets from its block's.
+// - `apply`: each workgroup adds up the block sums before its own, then writes its
+//   Gaussians' offsets; the last block writes the total.
+// (A dispatch between them that turned the block sums into offsets once would cost more
+// than it saves: each dependent dispatch costs microseconds on a GPU.)
 // Sums saturate, so an absurd total reads as an overflow, never as a small wrapped count.
 // Saturating addition of unsigned values is associative, so any grouping gives the same
 // numbers, bit for bit.
@@ -14,7 +15,7 @@
 @group(0) @binding(2) var<storage, read_write> first_entry: array<u32>;
 // [0]: entries in all (the sort's count).
 @group(0) @binding(3) var<storage, read_write> entries: array<u32>;
-// One per block: its sum after `blocks`, its starting offset after `top`.
+// One per block: its sum.
 @group(0) @binding(4) var<storage, read_write> block_sums: array<u32>;
 
 var<workgroup> sums: array<u32, GROUP>;
@@ -73,48 +74,37 @@ fn blocks(@builtin(workgroup_id) wg: vec3<u32>,
 }
 
 @compute @workgroup_size(GROUP, 1, 1)
-fn top(@builtin(local_invocation_index) lid: u32) {
-    let n = block_count();
-    let share = (n + GROUP - 1u) / GROUP;
-    let start = min(lid * share, n);
-    let end = min(start + share, n);
-    var s = 0u;
-    for (var b = start; b < end; b = b + 1u) {
-        s = add_sat(s, block_sums[b]);
-    }
-    sums[lid] = s;
-    scan_sums(lid);
-    var run = 0u;
-    if (lid > 0u) {
-        run = sums[lid - 1u];
-    }
-    for (var b = start; b < end; b = b + 1u) {
-        let t = block_sums[b];
-        block_sums[b] = run;
-        run = add_sat(run, t);
-    }
-    if (lid == GROUP - 1u) {
-        entries[0] = sums[GROUP - 1u];
-    }
-}
-
-@compute @workgroup_size(GROUP, 1, 1)
 fn apply(@builtin(workgroup_id) wg: vec3<u32>,
          @builtin(num_workgroups) groups: vec3<u32>,
          @builtin(local_invocation_index) lid: u32) {
     let b = workgroup_index(wg, groups);
     if (b >= block_count()) {
+        // No Gaussians: no last block to write the total.
+        if (b == 0u && lid == 0u) {
+            entries[0] = 0u;
+        }
         return;
     }
+    // The blocks before this one.
+    var before = 0u;
+    for (var k = lid; k < b; k = k + GROUP) {
+        before = add_sat(before, block_sums[k]);
+    }
+    sums[lid] = before;
+    scan_sums(lid);
+    var run = sums[GROUP - 1u];
+    workgroupBarrier();
     let share = share_of(b, lid);
     sums[lid] = share_sum(share);
     scan_sums(lid);
-    var run = block_sums[b];
     if (lid > 0u) {
         run = add_sat(run, sums[lid - 1u]);
     }
     for (var g = share.x; g < share.y; g = g + 1u) {
         first_entry[g] = run;
         run = add_sat(run, touched[g]);
+    }
+    if (b + 1u == block_count() && lid == GROUP - 1u) {
+        entries[0] = run;
     }
 }

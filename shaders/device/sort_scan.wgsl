@@ -2,17 +2,19 @@
 // exclusive prefix sums, i.e. the first output slot of each (digit, block).
 //
 // The histogram read as one flat array (256 rows of `blocks` counts, digit-major) is
-// scanned in three entry points, so that the work spreads over one workgroup per chunk
+// scanned in two entry points, so that the work spreads over one workgroup per chunk
 // of SORT_WG * SCAN_PER counts rather than one workgroup for all:
 // - `chunks`: each workgroup sums its chunk into `chunk_sums`;
-// - `top`: one workgroup turns the chunk sums into each chunk's starting offset;
-// - `apply`: each workgroup rewrites its chunk's counts as running offsets.
+// - `apply`: each workgroup adds up the chunk sums before its own (at most a few hundred
+//   even at 12 MP), then rewrites its chunk's counts as running offsets.
+// A third dispatch that turned the chunk sums into offsets once would cost more than it
+// saves: on a GPU each dependent dispatch costs microseconds however little it does.
 // Plain integer sums: their grouping does not change them, so the offsets are those of
 // a serial scan, deterministic.
 
 @group(0) @binding(0) var<uniform> params: SortParams;
 @group(0) @binding(1) var<storage, read_write> hist: array<u32>;
-// One per chunk: its sum after `chunks`, its starting offset after `top`.
+// One per chunk: its sum.
 @group(0) @binding(2) var<storage, read_write> chunk_sums: array<u32>;
 
 var<workgroup> sums: array<u32, 256>;
@@ -69,26 +71,6 @@ fn chunks(@builtin(workgroup_id) wg: vec3<u32>,
 }
 
 @compute @workgroup_size(256, 1, 1)
-fn top(@builtin(local_invocation_index) lid: u32) {
-    let n = chunk_count();
-    let share = (n + 255u) / 256u;
-    let start = min(lid * share, n);
-    let end = min(start + share, n);
-    var s = 0u;
-    for (var c = start; c < end; c = c + 1u) {
-        s = s + chunk_sums[c];
-    }
-    sums[lid] = s;
-    scan_sums(lid);
-    var run = sums[lid] - s;
-    for (var c = start; c < end; c = c + 1u) {
-        let t = chunk_sums[c];
-        chunk_sums[c] = run;
-        run = run + t;
-    }
-}
-
-@compute @workgroup_size(256, 1, 1)
 fn apply(@builtin(workgroup_id) wg: vec3<u32>,
          @builtin(num_workgroups) groups: vec3<u32>,
          @builtin(local_invocation_index) lid: u32) {
@@ -96,11 +78,20 @@ fn apply(@builtin(workgroup_id) wg: vec3<u32>,
     if (c >= chunk_count()) {
         return;
     }
+    // The chunks before this one.
+    var before = 0u;
+    for (var k = lid; k < c; k = k + 256u) {
+        before = before + chunk_sums[k];
+    }
+    sums[lid] = before;
+    scan_sums(lid);
+    let offset = sums[255u];
+    workgroupBarrier();
     let share = share_of(c, lid);
     let s = share_sum(share);
     sums[lid] = s;
     scan_sums(lid);
-    var run = chunk_sums[c] + sums[lid] - s;
+    var run = offset + sums[lid] - s;
     for (var i = share.x; i < share.y; i = i + 1u) {
         let count = hist[i];
         hist[i] = run;

@@ -31,8 +31,8 @@ pub const GROUP: u32 = 256;
 pub struct ForwardKernels {
     pub range: Kernel,
     pub project: Kernel,
-    /// `fit_scan.wgsl`'s `blocks`, `top` and `apply`, sharing one bind group.
-    pub scan: [Kernel; 3],
+    /// `fit_scan.wgsl`'s `blocks` and `apply`, sharing one bind group.
+    pub scan: [Kernel; 2],
     pub emit: Kernel,
     pub tiles: Kernel,
     pub sort: RadixSort,
@@ -60,7 +60,7 @@ impl ForwardKernels {
                 device,
                 "fit_scan",
                 &shader!("device/fit_common", "device/fit_scan"),
-                ["blocks", "top", "apply"],
+                ["blocks", "apply"],
                 1,
                 3,
             ),
@@ -259,12 +259,11 @@ impl Forward {
         })
     }
 
-    /// The scan's three dispatches: block sums, block offsets, the Gaussians' offsets.
-    fn scan<'a>(&'a self, k: &'a ForwardKernels) -> [Dispatch<'a>; 3] {
+    /// The scan's two dispatches: block sums, then each block's offset and its Gaussians'.
+    fn scan<'a>(&'a self, k: &'a ForwardKernels) -> [Dispatch<'a>; 2] {
         [
             (&k.scan[0], &self.scan, self.scan_groups),
-            (&k.scan[1], &self.scan, (1, 1)),
-            (&k.scan[2], &self.scan, self.scan_groups),
+            (&k.scan[1], &self.scan, self.scan_groups),
         ]
     }
 
@@ -273,10 +272,10 @@ impl Forward {
     pub fn count_entries(&self, gpu: &Gpu) -> Result<u64> {
         let k = ForwardKernels::of(gpu);
         let mut enc = gpu.encoder();
-        let [a, b, c] = self.scan(k);
+        let [a, b] = self.scan(k);
         gpu.pass(
             &mut enc,
-            &[(&k.project, &self.project, self.gaussian_groups), a, b, c],
+            &[(&k.project, &self.project, self.gaussian_groups), a, b],
         );
         let [entries] = gpu.read_back(enc, [&self.entries])?;
         Ok(u64::from(bytemuck::cast_slice::<u8, u32>(&entries)[0]))
@@ -291,7 +290,7 @@ impl Forward {
         quantized: bool,
     ) {
         let k = ForwardKernels::of(gpu);
-        let [a, b, c] = self.scan(k);
+        let [a, b] = self.scan(k);
         let mut dispatches = Vec::with_capacity(6);
         if quantized {
             dispatches.push((&k.range, &self.range, (1, 1)));
@@ -300,7 +299,6 @@ impl Forward {
             (&k.project, &self.project, self.gaussian_groups),
             a,
             b,
-            c,
             (&k.emit, &lists.emit, self.gaussian_groups),
         ]);
         gpu.pass(enc, &dispatches);

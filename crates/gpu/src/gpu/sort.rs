@@ -26,8 +26,8 @@ const BINS: u64 = 1 << DIGIT_BITS;
 /// The pipelines, built once per device.
 pub struct RadixSort {
     histogram: Kernel,
-    /// `sort_scan.wgsl`'s `chunks`, `top` and `apply`, sharing one bind group.
-    scan: [Kernel; 3],
+    /// `sort_scan.wgsl`'s `chunks` and `apply`, sharing one bind group.
+    scan: [Kernel; 2],
     scatter: Kernel,
 }
 
@@ -45,7 +45,7 @@ impl RadixSort {
                 device,
                 "sort_scan",
                 &shader!("device/sort_common", "device/sort_scan"),
-                ["chunks", "top", "apply"],
+                ["chunks", "apply"],
                 0,
                 2,
             ),
@@ -208,8 +208,7 @@ impl SortPlan {
                 sort.histogram
                     .dispatch(&mut pass, &p.histogram, self.groups);
                 sort.scan[0].dispatch(&mut pass, &p.scan, self.scan_groups);
-                sort.scan[1].dispatch(&mut pass, &p.scan, (1, 1));
-                sort.scan[2].dispatch(&mut pass, &p.scan, self.scan_groups);
+                sort.scan[1].dispatch(&mut pass, &p.scan, self.scan_groups);
                 sort.scatter.dispatch(&mut pass, &p.scatter, self.groups);
             }
         }
