@@ -26,6 +26,8 @@ run_kit() {
     out="${OUT:-target/gpukit}"
     mkdir -p "$out"
     export GSI_REQUIRE_GPU=1 GSI_REPO="$PWD" GSI_BIN="$PWD/$kit/gsi"
+    # The commit the kit was built from, for gpu.json.
+    [ -f "$kit/COMMIT" ] && GSI_COMMIT="$(cat "$kit/COMMIT")" && export GSI_COMMIT
     export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-$(mktemp -d)}"
     status=0
     # The CLI's GPU tests, then each crate's unit tests of its GPU twins (filtered to
@@ -83,6 +85,8 @@ mkdir -p "$kit/kodak" "$kit/gl" /tmp/gsi-apt/partial
 cargo build --release --example gpu_bench -p gsi-cli
 cargo build --release --bin gsi -p gsi-cli
 cp target/release/examples/gpu_bench target/release/gsi "$kit/"
+# The commit built, marked when the tree had changes beyond it.
+echo "$(git rev-parse --short HEAD)$(git diff --quiet HEAD -- . ':!.gpukit' || echo '+changes')" >"$kit/COMMIT"
 # The test binaries, as cargo names them in its JSON messages.
 exe_of() {
     grep -E '"profile":\{[^}]*"test":true' | grep '"executable":"/' | sed 's/.*"executable":"\([^"]*\)".*/\1/' | head -n 1

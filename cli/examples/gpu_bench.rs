@@ -177,7 +177,12 @@ fn load(path: &Path) -> Target {
     }
 }
 
+/// `GSI_COMMIT` where the kit set it (the commit it was built from: a device machine's
+/// copy of the tree may carry an older `.git`), else what git says here.
 fn commit() -> String {
+    if let Ok(c) = std::env::var("GSI_COMMIT") {
+        return c;
+    }
     std::process::Command::new("git")
         .args(["rev-parse", "--short", "HEAD"])
         .output()
