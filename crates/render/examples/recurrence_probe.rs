@@ -15,8 +15,10 @@
 //! (`C > −RESTART`) takes every row from `E`. What it had to learn: near a centre the
 //! differenced power rounds to either side of 0, so the spec's `power ≤ 0` test (a guard
 //! against rounding in the direct form) must not be kept, or a Gaussian loses its peak.
-//! The probe times the spec's loop (`Kernel::tile`) and this one on the same tile lists,
-//! alternating, one thread, and compares their sums.
+//! The probe times the spec's loop (`Kernel::tile`), this one and, on x86-64 with FMA,
+//! the spec's rule with its multiply-adds fused (the other cheap spec change: `E` in
+//! FMA steps), on the same tile lists, alternating, one thread, and compares their sums
+//! with the spec's.
 
 use gsi_format::contract::{exp_in_range, ALPHA_MIN, EXP_MIN};
 use gsi_format::format::{read_file, Limits};
@@ -126,6 +128,32 @@ fn tile_sum_rec(list: &[u32], proj: &[Projected], rect: Rect, acc: &mut Acc, sta
     }
 }
 
+/// The spec's rule with its multiply-adds fused (`exp`'s polynomial in FMA steps): what a
+/// spec that defined `E` with fused multiply-adds would cost, on x86-64 with AVX2 and FMA.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn fused_tile(list: &[u32], proj: &[Projected], rect: Rect, acc: &mut Acc) {
+    for &k in list {
+        let g = &proj[k as usize];
+        let Some(f) = Footprint::of(g, rect) else {
+            continue;
+        };
+        for start in f.starts() {
+            for j in f.ys.clone() {
+                let dy = offset(j, g.mean[1]);
+                let (alpha, _) = f.alphas_with::<true, false, false>(start, dy);
+                let at = (j - rect.y0) as usize * ACC_W + start;
+                for (ch, plane) in acc.0.iter_mut().enumerate() {
+                    let px = &mut plane[at..at + LANES];
+                    for l in 0..LANES {
+                        px[l] += g.color[ch] * alpha[l];
+                    }
+                }
+            }
+        }
+    }
+}
+
 /// The probe's loop, built for AVX2 where the CPU has it (as `Kernel::detect` picks the
 /// spec's), else portable.
 fn rec_tile(list: &[u32], proj: &[Projected], rect: Rect, acc: &mut Acc, stats: &mut [u64; 3]) {
@@ -174,59 +202,84 @@ fn main() {
         })
         .collect();
     let kernel = Kernel::detect();
-    let mut spec = Vec::new();
-    let mut rec = Vec::new();
-    let run = |rec_path: bool, out: &mut Vec<Acc>| -> (f64, [u64; 3]) {
+    #[cfg(target_arch = "x86_64")]
+    let fused = std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma");
+    #[cfg(not(target_arch = "x86_64"))]
+    let fused = false;
+    // 0: the spec's loop; 1: the recurrence; 2: the spec's rule with fused multiply-adds.
+    let run = |path: usize, out: &mut Vec<Acc>| -> (f64, [u64; 3]) {
         out.clear();
         let mut stats = [0u64; 3];
         let t = Instant::now();
         for (i, rect) in rects.iter().enumerate() {
             let mut acc = Acc::zero();
-            if rec_path {
-                rec_tile(lists.list(i), &proj, *rect, &mut acc, &mut stats);
-            } else {
-                kernel.tile(Blend::Sum, lists.list(i), &proj, *rect, &mut acc);
+            match path {
+                0 => kernel.tile(Blend::Sum, lists.list(i), &proj, *rect, &mut acc),
+                1 => rec_tile(lists.list(i), &proj, *rect, &mut acc, &mut stats),
+                // SAFETY: path 2 runs only where the CPU has AVX2 and FMA (`fused`).
+                #[cfg(target_arch = "x86_64")]
+                _ => unsafe { fused_tile(lists.list(i), &proj, *rect, &mut acc) },
+                #[cfg(not(target_arch = "x86_64"))]
+                _ => unreachable!(),
             }
             out.push(acc);
         }
         (t.elapsed().as_secs_f64() * 1e3, stats)
     };
-    let (mut ts, mut tr) = (Vec::new(), Vec::new());
+    let paths = if fused { 3 } else { 2 };
+    let mut outs: Vec<Vec<Acc>> = (0..paths).map(|_| Vec::new()).collect();
+    let mut times: Vec<Vec<f64>> = vec![Vec::new(); paths];
     let mut stats = [0u64; 3];
     for _ in 0..15 {
-        ts.push(run(false, &mut spec).0);
-        let (t, r) = run(true, &mut rec);
-        tr.push(t);
-        stats = r;
-    }
-    ts.sort_by(f64::total_cmp);
-    tr.sort_by(f64::total_cmp);
-    // Pixels: max |difference| of the f32 sums, and 8-bit values that differ.
-    let (mut worst, mut differ, mut n) = (0f32, 0usize, 0usize);
-    for (t, rect) in rects.iter().enumerate() {
-        for j in 0..(rect.y1 - rect.y0) as usize {
-            for i in 0..(rect.x1 - rect.x0) as usize {
-                for ch in 0..3 {
-                    let a = spec[t].0[ch][j * ACC_W + i];
-                    let b = rec[t].0[ch][j * ACC_W + i];
-                    worst = worst.max((a - b).abs());
-                    let q = |x: f32| (x.clamp(0.0, 1.0) * 255.0).round() as u8;
-                    differ += usize::from(q(a) != q(b));
-                    n += 1;
-                }
+        for (path, out) in outs.iter_mut().enumerate() {
+            let (t, s) = run(path, out);
+            times[path].push(t);
+            if path == 1 {
+                stats = s;
             }
         }
     }
+    let median = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
     println!(
-        "{}x{} {} Gaussians ({:?}): spec loop {:.2} ms, recurrence {:.2} ms (medians of 15, one thread); {} chunk-rows, {:.1} % of their lanes taking light, {} restarted; max |sum difference| {worst:.2e}; 8-bit values differing {differ} of {n}",
-        w,
-        h,
+        "{w}x{h} {} Gaussians ({kernel:?}), medians of 15, one thread: spec loop {:.2} ms, recurrence {:.2} ms{}",
         proj.len(),
-        kernel,
-        ts[7],
-        tr[7],
+        median(&mut times[0]),
+        median(&mut times[1]),
+        if fused {
+            format!(", spec rule with fused multiply-adds {:.2} ms", median(&mut times[2]))
+        } else {
+            String::new()
+        }
+    );
+    println!(
+        "recurrence: {} chunk-rows, {:.1} % of their lanes taking light, {} restarted",
         stats[0],
         100.0 * stats[1] as f64 / (8.0 * stats[0] as f64),
         stats[2]
     );
+    for (path, name) in [(1, "recurrence"), (2, "fused")]
+        .into_iter()
+        .take(paths - 1)
+    {
+        // Max |difference| of the f32 sums, and 8-bit values that differ, against the spec.
+        let (mut worst, mut differ, mut n) = (0f32, 0usize, 0usize);
+        for (t, rect) in rects.iter().enumerate() {
+            for j in 0..(rect.y1 - rect.y0) as usize {
+                for i in 0..(rect.x1 - rect.x0) as usize {
+                    for ch in 0..3 {
+                        let a = outs[0][t].0[ch][j * ACC_W + i];
+                        let b = outs[path][t].0[ch][j * ACC_W + i];
+                        worst = worst.max((a - b).abs());
+                        let q = |x: f32| (x.clamp(0.0, 1.0) * 255.0).round() as u8;
+                        differ += usize::from(q(a) != q(b));
+                        n += 1;
+                    }
+                }
+            }
+        }
+        println!("{name} against the spec: max |sum difference| {worst:.2e}; 8-bit values differing {differ} of {n}");
+    }
 }
