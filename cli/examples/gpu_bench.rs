@@ -6,9 +6,11 @@
 //!
 //! 1. Draw rate: Kodak images of 768×512 fitted on the GPU with 10k and 70k Gaussians,
 //!    then drawn resident ([`gsi::gpu::GpuScene`]: projection, binning and render on the
-//!    GPU per frame, nothing read back), frames per second over a few hundred frames;
-//!    beside it, `Gpu::render` per call (CPU projection, upload, render, read-back), which
-//!    is what `gsi decode --device gpu` does once.
+//!    GPU per frame, nothing read back), frames per second over a few hundred frames,
+//!    with the submitting thread's CPU time per frame and the rate of the scene's first
+//!    64 Gaussians alone (the floor a frame has whatever it draws: submission and a
+//!    chain of dependent dispatches); beside it, `Gpu::render` per call (CPU projection,
+//!    upload, render, read-back), which is what `gsi decode --device gpu` does once.
 //! 2. Time to quality: every Kodak image (or `--limit N`) encoded on the GPU with 9000
 //!    Gaussians at increasing iteration counts; wall time and the PSNR of the stored
 //!    (quantized) file, so the first count whose mean reaches 32 dB gives the time to
