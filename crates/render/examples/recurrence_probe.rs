@@ -40,7 +40,7 @@ fn e(x: f32) -> f32 {
 }
 
 #[inline(always)]
-fn tile_sum_rec(list: &[u32], proj: &[Projected], rect: Rect, acc: &mut Acc, stats: &mut [u64; 3]) {
+fn tile_sum_rec(list: &[u32], proj: &[Projected], rect: Rect, acc: &mut Acc, stats: &mut [u64; 4]) {
     for &k in list {
         let g = &proj[k as usize];
         let Some(f) = Footprint::of(g, rect) else {
@@ -89,7 +89,9 @@ fn tile_sum_rec(list: &[u32], proj: &[Projected], rect: Rect, acc: &mut Acc, sta
                     alpha[l] = if keep { a } else { 0.0 };
                 }
                 stats[0] += 1;
-                stats[1] += alpha.iter().filter(|&&a| a != 0.0).count() as u64;
+                let lit = alpha.iter().filter(|&&a| a != 0.0).count() as u64;
+                stats[1] += lit;
+                stats[3] += u64::from(lit == 0);
                 for (ch, plane) in acc.0.iter_mut().enumerate() {
                     let px = &mut plane[at..at + LANES];
                     for l in 0..LANES {
@@ -156,7 +158,7 @@ fn fused_tile(list: &[u32], proj: &[Projected], rect: Rect, acc: &mut Acc) {
 
 /// The probe's loop, built for AVX2 where the CPU has it (as `Kernel::detect` picks the
 /// spec's), else portable.
-fn rec_tile(list: &[u32], proj: &[Projected], rect: Rect, acc: &mut Acc, stats: &mut [u64; 3]) {
+fn rec_tile(list: &[u32], proj: &[Projected], rect: Rect, acc: &mut Acc, stats: &mut [u64; 4]) {
     #[cfg(target_arch = "x86_64")]
     if std::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU has AVX2 (detected just above).
@@ -172,7 +174,7 @@ fn rec_tile_avx2(
     proj: &[Projected],
     rect: Rect,
     acc: &mut Acc,
-    stats: &mut [u64; 3],
+    stats: &mut [u64; 4],
 ) {
     tile_sum_rec(list, proj, rect, acc, stats)
 }
@@ -207,9 +209,9 @@ fn main() {
     #[cfg(not(target_arch = "x86_64"))]
     let fused = false;
     // 0: the spec's loop; 1: the recurrence; 2: the spec's rule with fused multiply-adds.
-    let run = |path: usize, out: &mut Vec<Acc>| -> (f64, [u64; 3]) {
+    let run = |path: usize, out: &mut Vec<Acc>| -> (f64, [u64; 4]) {
         out.clear();
-        let mut stats = [0u64; 3];
+        let mut stats = [0u64; 4];
         let t = Instant::now();
         for (i, rect) in rects.iter().enumerate() {
             let mut acc = Acc::zero();
@@ -229,7 +231,7 @@ fn main() {
     let paths = if fused { 3 } else { 2 };
     let mut outs: Vec<Vec<Acc>> = (0..paths).map(|_| Vec::new()).collect();
     let mut times: Vec<Vec<f64>> = vec![Vec::new(); paths];
-    let mut stats = [0u64; 3];
+    let mut stats = [0u64; 4];
     for _ in 0..15 {
         for (path, out) in outs.iter_mut().enumerate() {
             let (t, s) = run(path, out);
@@ -255,9 +257,10 @@ fn main() {
         }
     );
     println!(
-        "recurrence: {} chunk-rows, {:.1} % of their lanes taking light, {} restarted",
+        "recurrence: {} chunk-rows, {:.1} % of their lanes taking light, {:.1} % with none, {} restarted",
         stats[0],
         100.0 * stats[1] as f64 / (8.0 * stats[0] as f64),
+        100.0 * stats[3] as f64 / stats[0] as f64,
         stats[2]
     );
     for (path, name) in [(1, "recurrence"), (2, "fused")]
