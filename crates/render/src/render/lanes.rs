@@ -91,7 +91,7 @@ impl Footprint<'_> {
     /// `dy` from the centre, and their offsets `dx`: the first half of
     /// [`Footprint::alphas_with`], which [`Footprint::alphas_of`] completes.
     #[inline(always)]
-    pub fn powers<const F: bool>(&self, start: usize, dy: f32) -> (V, V) {
+    pub(crate) fn powers<const F: bool>(&self, start: usize, dy: f32) -> (V, V) {
         let g = self.g;
         let [ca, cb, cc] = g.conic;
         let cdy = cc * dy * dy;
@@ -115,7 +115,7 @@ impl Footprint<'_> {
     /// loop came out 1–3 % (kodim23) and 7–14 % (kodim13) faster. (Counting the lanes
     /// outside the box's columns as dark too skipped more and measured no faster.)
     #[inline(always)]
-    pub fn dark(&self, power: &V) -> bool {
+    pub(crate) fn dark(&self, power: &V) -> bool {
         let cut = self.g.cutoff();
         // A NaN is not below the cut: such a chunk is evaluated, as the rule says.
         power.iter().fold(true, |dark, &p| dark & (p < cut))
@@ -124,7 +124,7 @@ impl Footprint<'_> {
     /// The alphas of `power` (from [`Footprint::powers`] at `start`): 0 where the
     /// Gaussian does not touch the pixel, as [`Footprint::alphas_with`] gives them.
     #[inline(always)]
-    pub fn alphas_of<const F: bool, const CAP: bool, const JOIN: bool>(
+    pub(crate) fn alphas_of<const F: bool, const CAP: bool, const JOIN: bool>(
         &self,
         start: usize,
         power: &V,
