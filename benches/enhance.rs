@@ -98,6 +98,12 @@ fn enhance_iteration(c: &mut Criterion) {
                 ))
             })
         });
+        let speckle = gsi::format::Speckle {
+            threshold: 0.015_294_117,
+        };
+        group.bench_function(format!("{}/speckle/4k", blend.name()), |b| {
+            b.iter(|| black_box(gsi::enhance::speckle::apply(&scene, &g.colors, &speckle)))
+        });
         group.bench_function(format!("{}/setup/4k", blend.name()), |b| {
             b.iter(|| black_box(Session::new(&scene, &opts, &FeatureBank)))
         });

@@ -118,6 +118,7 @@ pub fn to_json(f: &GsiFile) -> serde_json::Value {
                 "map": [e.map_width, e.map_height],
                 "iterations": e.fit.iterations,
                 "exposure": e.fit.exposure,
+                "speckle": e.speckle.map(|k| json!({"threshold": k.threshold})),
                 "denoise": e.denoise.map(|d| json!({
                     "range": d.range, "strength": d.strength, "passes": d.passes,
                 })),
@@ -199,7 +200,14 @@ pub fn to_text(f: &GsiFile) -> String {
     match &st.enhancer {
         Some(Ok(e)) => {
             s += &format!(
-                "enhanced: {}{} colour operators (hidden {}), {}x{} weight map, fitted in {} iterations to exposure {}{}; {}\n",
+                "enhanced: {}{}{} colour operators (hidden {}), {}x{} weight map, fitted in {} iterations to exposure {}{}; {}\n",
+                match e.speckle {
+                    Some(k) => format!(
+                        "Gaussians within the noise removed (threshold {:.4}), then ",
+                        k.threshold
+                    ),
+                    None => String::new(),
+                },
                 match e.denoise {
                     Some(d) => format!(
                         "denoised ({}, range {:.4}, strength {}), then ",

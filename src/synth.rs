@@ -204,58 +204,80 @@ mod corpus {
         // `gained` ones with a layout-4 gENH (a gain map, §7.2.3) and a GTRC (§6.6); the
         // `chroma` ones with a layout-5 gENH (a chroma map, §7.2.4), after a gain map and
         // alone.
-        for (name, blend, denoised, toned, gained, chroma) in [
-            ("enhanced-sum-160", Sum, false, false, false, false),
-            ("enhanced-alpha-160", Alpha, false, false, false, false),
-            ("enhanced-denoised-sum-160", Sum, true, false, false, false),
+        // The `speckle` ones with a layout-6 gENH (§7.2.5), alone, with every other
+        // record, and in an `alpha` file (where the step changes nothing).
+        let st = |denoised, toned, gained, chroma, speckle| Stage2 {
+            denoised,
+            toned,
+            gained,
+            chroma,
+            speckle,
+        };
+        for (name, blend, stored) in [
+            (
+                "enhanced-sum-160",
+                Sum,
+                st(false, false, false, false, false),
+            ),
+            (
+                "enhanced-alpha-160",
+                Alpha,
+                st(false, false, false, false, false),
+            ),
+            (
+                "enhanced-denoised-sum-160",
+                Sum,
+                st(true, false, false, false, false),
+            ),
             (
                 "enhanced-denoised-alpha-160",
                 Alpha,
-                true,
-                false,
-                false,
-                false,
+                st(true, false, false, false, false),
             ),
             (
                 "enhanced-denoised-toned-sum-160",
                 Sum,
-                true,
-                true,
-                false,
-                false,
+                st(true, true, false, false, false),
             ),
-            ("enhanced-toned-alpha-160", Alpha, false, true, false, false),
+            (
+                "enhanced-toned-alpha-160",
+                Alpha,
+                st(false, true, false, false, false),
+            ),
             (
                 "enhanced-denoised-gained-sum-160",
                 Sum,
-                true,
-                false,
-                true,
-                false,
+                st(true, false, true, false, false),
             ),
             (
                 "enhanced-gained-alpha-160",
                 Alpha,
-                false,
-                false,
-                true,
-                false,
+                st(false, false, true, false, false),
             ),
             (
                 "enhanced-gained-chroma-sum-160",
                 Sum,
-                false,
-                false,
-                true,
-                true,
+                st(false, false, true, true, false),
             ),
             (
                 "enhanced-chroma-alpha-160",
                 Alpha,
-                false,
-                false,
-                false,
-                true,
+                st(false, false, false, true, false),
+            ),
+            (
+                "enhanced-speckle-sum-160",
+                Sum,
+                st(false, false, false, false, true),
+            ),
+            (
+                "enhanced-speckle-all-sum-160",
+                Sum,
+                st(true, true, true, true, true),
+            ),
+            (
+                "enhanced-speckle-alpha-160",
+                Alpha,
+                st(false, false, false, false, true),
             ),
         ] {
             let mut scene = random_scene(13, spec(64, 40, 160, blend, Lsr, blend == Alpha));
@@ -269,12 +291,7 @@ mod corpus {
                         &Records::from_scene(&scene, BitDepths::default()),
                         "generator=gsi-synth",
                     ),
-                    Stage2 {
-                        denoised,
-                        toned,
-                        gained,
-                        chroma,
-                    },
+                    stored,
                 ),
                 expect: None,
             });
@@ -304,13 +321,16 @@ mod corpus {
     /// first (two passes, range 0.05); with `toned`, one that ends with a tone curve
     /// (`1.3·x^0.7`, three passes); with `gained`, one with a 4×3 gain map (1 to 6) after
     /// the mixture, shown through a `GTRC` curve (`min(1.8·sqrt(x), 0.97)`, 64 knots);
-    /// with `chroma`, one with a 5×4 chroma map (0 to 1) after that.
+    /// with `chroma`, one with a 5×4 chroma map (0 to 1) after that; with `speckle`, one
+    /// that first removes the Gaussians within a threshold of 0.1 (spec §7.2.5), high
+    /// enough that these dim random colours take both of its branches.
     pub(super) fn enhanced(bytes: &[u8], stored: Stage2) -> Vec<u8> {
         let Stage2 {
             denoised,
             toned,
             gained,
             chroma,
+            speckle,
         } = stored;
         use crate::enhance::{apply_record, colors_like, mixture::clamp_for, Enhancer};
         let file = format::ChunkedFile::parse(bytes, format::Limits::default()).expect("own file");
@@ -365,6 +385,7 @@ mod corpus {
                 scales: format::Attribute::fit(&scales, [8]),
             }
         });
+        record.speckle = speckle.then_some(format::Speckle { threshold: 0.1 });
         let curve = (gained || chroma).then(|| {
             crate::model::ToneCurve::sample(64, |x| (1.8 * x.sqrt()).min(0.97)).expect("64 knots")
         });
@@ -382,6 +403,7 @@ mod corpus {
         pub toned: bool,
         pub gained: bool,
         pub chroma: bool,
+        pub speckle: bool,
     }
 
     /// Records whose covariances are singular, vanishing or enormous, and Gaussians far

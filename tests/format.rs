@@ -464,8 +464,8 @@ fn genh_layout_2_reads_writes_and_refuses_as_specified() {
     ] {
         assert_eq!(kind, ErrorKind::InvalidValue, "{what}");
     }
-    assert_eq!(refused(&|b| b[0] = 6), ErrorKind::UnsupportedVersion);
-    // Byte 3 is 0 in layouts 1 and 2, and never 0 in layouts 3 to 5.
+    assert_eq!(refused(&|b| b[0] = 7), ErrorKind::UnsupportedVersion);
+    // Byte 3 is 0 in layouts 1 and 2, and never 0 in layouts 3 to 6.
     assert_eq!(refused(&|b| b[0] = 4), ErrorKind::InvalidValue);
     assert_eq!(refused(&|b| b[0] = 5), ErrorKind::InvalidValue);
     assert_eq!(refused(&|b| b[3] = 1), ErrorKind::InvalidValue);
@@ -653,7 +653,7 @@ fn genh_layout_5_reads_writes_and_refuses_as_specified() {
     ] {
         assert_eq!(kind, ErrorKind::InvalidValue, "{what}");
     }
-    assert_eq!(refused(&|b| b[0] = 6), ErrorKind::UnsupportedVersion);
+    assert_eq!(refused(&|b| b[0] = 7), ErrorKind::UnsupportedVersion);
     // Another map size: the last block no longer holds width·height scales.
     assert!(format::EnhancerRecord::parse(
         &{
@@ -675,6 +675,78 @@ fn genh_layout_5_reads_writes_and_refuses_as_specified() {
         let kind = last_block_range_refused(&ok.to_payload(19).unwrap(), 0.75, lo, hi);
         assert_eq!(kind, ErrorKind::InvalidValue, "[{lo}, {hi}]");
     }
+}
+
+/// §7.2 layout 6: the speckle record follows every other record, the spec's example
+/// record reads as written, an enhancer without one keeps its lower layout, and a
+/// threshold outside `(0, 1]` or a records byte layout 6 does not allow is refused.
+#[test]
+fn genh_layout_6_reads_writes_and_refuses_as_specified() {
+    let (alone, alone_bytes) = corpus_enhancer("enhanced-speckle-sum-160.gsi");
+    assert_eq!((alone_bytes[0], alone_bytes[3]), (6, 16));
+    assert_eq!(alone.speckle, Some(format::Speckle { threshold: 0.1 }));
+    assert_eq!(&alone_bytes[68..72], &0.1f32.to_be_bytes());
+    assert_eq!(alone.to_payload(19).unwrap(), alone_bytes);
+    let (all, bytes) = corpus_enhancer("enhanced-speckle-all-sum-160.gsi");
+    assert_eq!((bytes[0], bytes[3]), (6, 31));
+    // Denoise (12 bytes), tone (12), gain (4), chroma (4), then the speckle record.
+    assert_eq!(&bytes[92..100], &[0, 4, 0, 3, 0, 5, 0, 4]);
+    assert_eq!(&bytes[100..104], &0.1f32.to_be_bytes());
+    assert_eq!(all.to_payload(19).unwrap(), bytes);
+    // Without it the same enhancer is written as layout 5.
+    let mut five = all.clone();
+    five.speckle = None;
+    assert_eq!(five.to_payload(19).unwrap()[..4], [5, 4, 3, 15]);
+
+    // The spec's example record, put in place of this one.
+    let example = spec_block("### 7.2.5 Removing the Gaussians", 1);
+    assert_eq!(example, [0x3c, 0x7a, 0x94, 0x2d]);
+    let mut b = alone_bytes.clone();
+    b[68..72].copy_from_slice(&example);
+    let r = format::EnhancerRecord::parse(&b, &Limits::default()).unwrap();
+    assert_eq!(r.speckle.unwrap().threshold, 0.015_294_117);
+
+    let refused = |edit: &dyn Fn(&mut Vec<u8>)| genh_refused(&bytes, edit);
+    for (what, kind) in [
+        ("threshold 0", refused(&f32_at(100, 0.0))),
+        ("threshold -0.1", refused(&f32_at(100, -0.1))),
+        ("threshold 1.5", refused(&f32_at(100, 1.5))),
+        ("threshold NaN", refused(&f32_at(100, f32::NAN))),
+        ("threshold inf", refused(&f32_at(100, f32::INFINITY))),
+        ("records without bit 4", refused(&|b| b[3] = 15)),
+        ("records bit 5", refused(&|b| b[3] = 63)),
+    ] {
+        assert_eq!(kind, ErrorKind::InvalidValue, "{what}");
+    }
+    assert_eq!(refused(&|b| b[0] = 7), ErrorKind::UnsupportedVersion);
+    // Layout 5 does not hold the record: bit 4 in a layout-5 chunk is refused.
+    assert_eq!(refused(&|b| b[0] = 5), ErrorKind::InvalidValue);
+    // The record cut off: the blocks start 4 bytes early and no longer parse.
+    let mut short = alone_bytes.clone();
+    short.drain(68..72);
+    assert!(format::EnhancerRecord::parse(&short, &Limits::default()).is_err());
+    // The corpus file takes both branches of step 4: some colours removed, some kept.
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/corpus/valid/enhanced-speckle-sum-160.gsi"
+    );
+    let file =
+        format::ChunkedFile::parse(&std::fs::read(path).unwrap(), Limits::default()).unwrap();
+    let scene = gsi::enhance::base_records(&file, &Limits::default())
+        .unwrap()
+        .to_scene();
+    let out =
+        gsi::enhance::speckle::apply(&scene, &scene.gaussians.colors, &alone.speckle.unwrap());
+    let removed = out.iter().filter(|c| **c == [0.0; 3]).count();
+    assert!(
+        removed > 0 && removed < out.len(),
+        "{removed} of {}",
+        out.len()
+    );
+    // Written from memory, a bad threshold is refused too.
+    let mut bad = alone.clone();
+    bad.speckle = Some(format::Speckle { threshold: 0.0 });
+    assert!(bad.to_payload(19).is_err());
 }
 
 /// §6.6's worked example: the chunk as printed, its CRC, and the three values.

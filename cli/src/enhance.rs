@@ -90,6 +90,12 @@ pub struct Args {
     /// the sensor's black level is moved towards grey (format spec §7.2.4).
     #[arg(long)]
     keep_shadow_colour: bool,
+    /// Keep the Gaussians that stage 1 fitted to the noise of a dark capture: by default,
+    /// a `sum` file's Gaussians whose colour stands within three noise levels of what
+    /// their footprint can resolve are shrunk or removed first, so that the lift does not
+    /// show them as black dots and bright needles on flat surfaces (format spec §7.2.5).
+    #[arg(long)]
+    keep_speckle: bool,
     /// Seed of the fit's initialization.
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -356,6 +362,7 @@ fn options(args: &Args) -> Result<EnhanceOptions, Failure> {
             local: !args.no_local,
             chroma: !args.keep_shadow_colour,
         }),
+        speckle: !args.keep_speckle,
         ..defaults
     })
 }

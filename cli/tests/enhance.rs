@@ -159,7 +159,8 @@ fn apply_from_reproduces_the_fitted_colours() {
 fn apply_from_reproduces(blend: Blend) {
     let before = dark_file(3, 70, blend, 0.2);
     let lim = Limits::default();
-    // Denoised first (gENH layout 2), then the mixture, then shown through GTRC: every
+    // In `sum` blending the Gaussians fitted to noise removed first (gENH layout 6),
+    // then denoised (layout 2 alone), then the mixture, then shown through GTRC: every
     // step an enhancer of this blend mode takes.
     let after = run(&before, &denoised(), true, &lim).bytes;
     let record = parse(&after).enhancer(&lim).unwrap().unwrap();
@@ -170,7 +171,10 @@ fn apply_from_reproduces(blend: Blend) {
         "{blend:?}: no tone curve stored"
     );
     let layout = payload(&file, ChunkType::ENHANCER).unwrap();
-    assert_eq!((layout[0], layout[3]), (2, 0), "layout 2, a denoise record");
+    let sum = blend == Blend::Sum;
+    assert_eq!(record.speckle.is_some(), sum, "{blend:?}: speckle record");
+    let want = if sum { (6, 0x11) } else { (2, 0) };
+    assert_eq!((layout[0], layout[3]), want, "{blend:?}: layout");
     // Applying the stored enhancer to the same original gives the same file.
     let again = enhance::apply_from(&parse(&before), &parse(&after), true, &lim).unwrap();
     assert_eq!(again, after);
@@ -190,7 +194,8 @@ fn apply_from_reproduces(blend: Blend) {
 }
 
 /// A scene whose footprints overlap past the neighbour search's share of the memory
-/// limit is still enhanced, without denoising (layout 1), and the caller is told why.
+/// limit is still enhanced, without denoising (layout 6 with the speckle record alone),
+/// and the caller is told why.
 #[test]
 fn too_much_overlap_for_denoising_is_enhanced_without_it() {
     let before = dark_file(5, 400, Blend::Sum, 0.05);
@@ -204,7 +209,8 @@ fn too_much_overlap_for_denoising_is_enhanced_without_it() {
     let why = fitted.denoise_skipped.expect("the skip is reported");
     assert!(why.contains("without denoising"), "{why}");
     let file = parse(&done.bytes);
-    assert_eq!(payload(&file, ChunkType::ENHANCER).unwrap()[0], 1);
+    let layout = payload(&file, ChunkType::ENHANCER).unwrap();
+    assert_eq!((layout[0], layout[3]), (6, 0x10));
     // The tone curve needs no neighbour search: it is there either way.
     assert!(file.file.records.tone.is_some());
     // With the default limits the same file is denoised.
@@ -235,8 +241,8 @@ fn lamp_file(seed: u64, blend: Blend) -> Vec<u8> {
 
 /// Where a lamp holds the curve back, the shadows are lifted by a gain map; where they
 /// were within a few noise levels of black, a chroma map follows it (gENH layout 5, both
-/// records bits); the file applies to itself and to its original exactly, and reverts
-/// exactly.
+/// records bits; layout 6 in `sum` blending, after the speckle removal); the file
+/// applies to itself and to its original exactly, and reverts exactly.
 #[test]
 fn a_lamp_lit_room_gets_a_gain_map_that_applies_and_reverts_exactly() {
     let lim = Limits::default();
@@ -256,8 +262,12 @@ fn a_lamp_lit_room_gets_a_gain_map_that_applies_and_reverts_exactly() {
             done.fitted.record.chroma.is_some(),
             "{blend:?}: a chroma map"
         );
-        assert_eq!(layout[0], 5, "{blend:?}: layout 5");
-        assert_eq!(layout[3] & 12, 12, "{blend:?}: records bits 2 and 3");
+        let (version, bits) = match blend {
+            Blend::Sum => (6, 28),
+            Blend::Alpha => (5, 12),
+        };
+        assert_eq!(layout[0], version, "{blend:?}: layout");
+        assert_eq!(layout[3] & bits, bits, "{blend:?}: records bits");
         assert_sane(&done.bytes);
         // Nothing shown is clipped (the shoulder stays below 250).
         let scene = after.file.records.to_scene();
@@ -457,13 +467,15 @@ fn cli_in_place_revert_and_apply_from() {
     assert_eq!(json["enhancer"]["experts"], 16);
     assert_eq!(json["enhancer"]["revertible"], true);
     assert_eq!(json["enhancer"]["denoise"]["passes"], 1);
+    let t = json["enhancer"]["speckle"]["threshold"].as_f64().unwrap();
+    assert!((t - 3.0 * 1.3 / 255.0).abs() < 1e-6, "{t}");
     assert!(json["enhancer"]["tone"].is_null());
     assert_eq!(json["tone_curve"]["knots"], 64);
     assert_eq!(json["tone_curve"]["curves"], 1);
     assert_eq!(json["file_bytes"].as_u64(), Some(after.len() as u64));
     let text = String::from_utf8(gsi(&["info", p]).stdout).unwrap();
     assert!(
-        text.contains("enhanced: denoised (1 pass, range ")
+        text.contains("enhanced: Gaussians within the noise removed (threshold 0.0153), then denoised (1 pass, range ")
             && text.contains("then 16 colour operators")
             && text.contains("shown through a tone curve (GTRC, 1 curve of 64 knots"),
         "{text}"
@@ -503,6 +515,24 @@ fn cli_in_place_revert_and_apply_from() {
     let out = gsi(&["enhance", p, "--in-place", "--revert"]);
     assert_eq!(out.status.code(), Some(1));
     assert_eq!(std::fs::read(&path).unwrap(), before);
+
+    // --keep-speckle stores no speckle record.
+    let kept = tmp("kept.gsi");
+    let k = kept.to_str().unwrap();
+    let out = gsi(&[
+        "enhance",
+        p,
+        "-o",
+        k,
+        "--iterations",
+        "5",
+        "--keep-speckle",
+        "--quiet",
+    ]);
+    assert!(out.status.success());
+    let json: serde_json::Value =
+        serde_json::from_slice(&gsi(&["info", k, "--json"]).stdout).unwrap();
+    assert!(json["enhancer"]["speckle"].is_null(), "{json}");
 }
 
 /// `--exposure E` and `--exposure auto` reach the exposure they aim at (issue 14's

@@ -4,7 +4,8 @@
 //! identity's range; its denoising (layouts 2 to 4) and its tone curve (layouts 3 and
 //! 4), finite colours, the curve's within `±64`; its gain map (layouts 4 and 5), finite
 //! colours within `±64` that keep their sign; its chroma map (layout 5), finite colours
-//! within `±64`, each between the colour and its grey.
+//! within `±64`, each between the colour and its grey; its speckle removal (layout 6),
+//! in both blend modes, finite colours no larger than they were and of the same sign.
 
 #![no_main]
 
@@ -35,29 +36,34 @@ fuzz_target!(|data: &[u8]| {
         [64.0, -64.0, 0.0],
         [0.0; 3],
     ];
+    // A small scene of these Gaussians with covariances `cov`.
+    let scene_of = |blend, cov: Vec<[f32; 3]>| Scene {
+        tone: None,
+        width: 7,
+        height: 5,
+        blend,
+        cov_param: CovParam::Cholesky,
+        gaussians: GaussianSet {
+            positions: positions.to_vec(),
+            cov,
+            colors: colors.to_vec(),
+            opacity: None,
+        },
+    };
     // Layouts 2 and 3: the denoising (spec §7.2.1) and the tone curve (§7.2.2) over a
     // small scene of odd shapes, a NaN centre and extreme colours included, stay finite
     // in both blend modes.
     if record.denoise.is_some() || record.tone.is_some() {
         for blend in [Blend::Sum, Blend::Alpha] {
-            let scene = Scene {
-                tone: None,
-                width: 7,
-                height: 5,
+            let scene = scene_of(
                 blend,
-                cov_param: CovParam::Cholesky,
-                gaussians: GaussianSet {
-                    positions: positions.to_vec(),
-                    cov: vec![
-                        [0.1, 0.0, 0.1],
-                        [0.0; 3],
-                        [16.0, -16.0, 16.0],
-                        [0.2, 0.1, 0.0],
-                    ],
-                    colors: colors.to_vec(),
-                    opacity: None,
-                },
-            };
+                vec![
+                    [0.1, 0.0, 0.1],
+                    [0.0; 3],
+                    [16.0, -16.0, 16.0],
+                    [0.2, 0.1, 0.0],
+                ],
+            );
             if let Some(d) = &record.denoise {
                 let out = gsi::enhance::denoise::denoise(&scene, &colors, d, &common::limits())
                     .expect("four Gaussians are within the limits");
@@ -72,6 +78,32 @@ fuzz_target!(|data: &[u8]| {
                         .all(|x| x.is_finite() && x.abs() <= 64.0),
                     "{out:?}"
                 );
+            }
+        }
+    }
+    // Layout 6: the speckle removal (spec §7.2.5) over odd footprints (a degenerate one,
+    // one far larger than the image, a NaN) shrinks colours towards 0, never past it.
+    if let Some(k) = &record.speckle {
+        for blend in [Blend::Sum, Blend::Alpha] {
+            let scene = scene_of(
+                blend,
+                vec![
+                    [0.1, 0.0, 0.1],
+                    [0.0; 3],
+                    [1e19, -1e19, 1e19],
+                    [f32::NAN, 0.1, 0.0],
+                ],
+            );
+            for (out, c) in gsi::enhance::speckle::apply(&scene, &colors, k)
+                .iter()
+                .zip(colors)
+            {
+                for (o, c) in out.iter().zip(c) {
+                    assert!(
+                        o.is_finite() && o.abs() <= c.abs() && o * c >= 0.0,
+                        "{o} from {c}"
+                    );
+                }
             }
         }
     }

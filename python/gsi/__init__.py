@@ -172,6 +172,7 @@ def enhance(
     tone: Optional[float] = None,
     local: bool = True,
     shadow_colour: bool = False,
+    speckle: bool = False,
     denoise: bool = False,
     force: bool = False,
     discard_original: bool = False,
@@ -185,7 +186,8 @@ def enhance(
     The options and defaults are ``gsi enhance``'s: ``exposure`` the mean luma to show the
     result at (default middle grey; ``"auto"`` meters it), ``tone`` the tone curve's power,
     ``local=False`` no gain map, ``shadow_colour=True`` no chroma map (the colour of
-    regions within the noise of black kept), ``denoise=True`` smoothing across neighbours first,
+    regions within the noise of black kept), ``speckle=True`` the Gaussians fitted to noise
+    kept, ``denoise=True`` smoothing across neighbours first,
     ``discard_original=True`` a smaller file that cannot be reverted, ``apply_from`` the
     enhancer stored in another file instead of fitting one. A file with no meaningful
     under-exposed part is returned unchanged with a :class:`NotLowLightWarning` unless
@@ -203,6 +205,7 @@ def enhance(
         tone=tone,
         local=local,
         shadow_colour=shadow_colour,
+        speckle=speckle,
         denoise=denoise,
         force=force,
         discard_original=discard_original,

@@ -242,7 +242,7 @@ fn decode<'py>(
 /// Stage 2 on a file: `(bytes, None)` when enhanced (or an enhancer applied from
 /// `apply_from`), `(data, why)` when the image is left as it is.
 #[pyfunction]
-#[pyo3(signature = (data, *, iterations=None, exposure=None, experts=None, learning_rate=None, weights=None, tone=None, local=true, shadow_colour=false, denoise=false, force=false, discard_original=false, apply_from=None, seed=0, device="cpu", progress=None))]
+#[pyo3(signature = (data, *, iterations=None, exposure=None, experts=None, learning_rate=None, weights=None, tone=None, local=true, shadow_colour=false, speckle=false, denoise=false, force=false, discard_original=false, apply_from=None, seed=0, device="cpu", progress=None))]
 #[allow(clippy::too_many_arguments)]
 fn enhance<'py>(
     py: Python<'py>,
@@ -255,6 +255,7 @@ fn enhance<'py>(
     tone: Option<f32>,
     local: bool,
     shadow_colour: bool,
+    speckle: bool,
     denoise: bool,
     force: bool,
     discard_original: bool,
@@ -310,6 +311,7 @@ fn enhance<'py>(
         weights,
         exposure,
         denoise: denoise.then(gsi::enhance::denoise::DenoiseOptions::default),
+        speckle: !speckle,
         curve,
         force,
         seed,

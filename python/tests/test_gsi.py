@@ -94,6 +94,10 @@ def test_enhance_matches_the_cli_and_reverts_exactly(cli, tmp_path, dark_encoded
     brighter = tmp_path / "brighter.gsi"
     cli("enhance", f, "-o", brighter, "--exposure", 0.6, "--device", "cpu", "--quiet")
     assert gsi.enhance(dark_encoded, exposure=0.6) == brighter.read_bytes()
+    kept = tmp_path / "kept.gsi"
+    cli("enhance", f, "-o", kept, "--keep-speckle", "--device", "cpu", "--quiet")
+    assert gsi.enhance(dark_encoded, speckle=True) == kept.read_bytes()
+    assert gsi.info(kept.read_bytes())["enhancer"]["speckle"] is None
     assert gsi.enhance(f, discard_original=True) != ours
     with pytest.raises(gsi.Error, match="original colours"):
         gsi.revert(gsi.enhance(f, discard_original=True))

@@ -62,10 +62,11 @@ fn mean_luma(rgb: &[u8], w: u32, h: u32) -> f64 {
 }
 
 /// Each default turned the other way in turn, and the metered exposure.
-const VARIANTS: [&str; 5] = [
+const VARIANTS: [&str; 6] = [
     "`--tone 1` (no power curve: the exposure only)",
     "`--no-local` (no gain map)",
     "`--keep-shadow-colour` (no chroma map)",
+    "`--keep-speckle` (Gaussians within the noise kept)",
     "`--denoise` (denoised first)",
     "`--exposure auto` (metered)",
 ];
@@ -95,6 +96,10 @@ fn variant_options(k: usize, d: &EnhanceOptions) -> EnhanceOptions {
             ..d.clone()
         },
         3 => EnhanceOptions {
+            speckle: false,
+            ..d.clone()
+        },
+        4 => EnhanceOptions {
             denoise: Some(gsi::enhance::denoise::DenoiseOptions::default()),
             ..d.clone()
         },
@@ -469,7 +474,7 @@ fn markdown(
          Machine: {}. Commit: `{}`. Produced by `cargo run --release --example report -- --enhance-only`.\n\n\
          Each low-light image is encoded at {BPP} bpp (stage 1 defaults), enhanced with the `gsi enhance` defaults \
          and decoded at its own size. The defaults: the low-light decision (a quarter of the image lit below 0.2), \
-         {}, the mixture ({} iterations, K = {}, working size {} px), then the tone curve `S(a·x^{})` on the blended \
+         {}{}, the mixture ({} iterations, K = {}, working size {} px), then the tone curve `S(a·x^{})` on the blended \
          values at mean luma {} (middle grey), its scale capped by the scene's highlights, a gain map that lifts \
          the shadows where the cap holds the curve back, and a chroma map that moves the colour of regions lit \
          within the noise of black towards grey. Scored with `gsi::metrics` (`../shared/data/README.md`'s \
@@ -478,6 +483,11 @@ fn markdown(
          the synthetic set and `mef13`; eval15 is reported, not tuned on.\n",
         stamp.0,
         stamp.1,
+        if opts.speckle {
+            "the Gaussians within three noise levels of their footprint's precision removed (`sum` files), "
+        } else {
+            ""
+        },
         match opts.denoise {
             Some(d) => format!(
                 "denoising across neighbouring Gaussians (range {} spreads, {} pass)",

@@ -195,6 +195,7 @@ impl Enhancer {
         EnhancerRecord {
             gain: None,
             chroma: None,
+            speckle: None,
             experts: self.experts as u8,
             hidden: h as u8,
             clamp: self.clamp,

@@ -9,10 +9,12 @@
 //! through a tone curve on the blended values (`GTRC`), which sets its exposure.
 //!
 //! `enhance` (feature `encode`) is the front door, as `fit::encode` is stage 1's: it
-//! decides whether the image is low-light at all (`assess`), then denoises, fits the
-//! mixture, and sets the curve and local exposure (`curve`).
+//! decides whether the image is low-light at all (`assess`), then removes the Gaussians
+//! fitted to noise, denoises, fits the mixture, and sets the curve and local exposure
+//! (`curve`).
 //!
 //! * [`mixture`]: the enhancer as stored and applied (no rendering needed).
+//! * [`speckle`]: the removal of the Gaussians fitted to noise, first of all.
 //! * [`denoise`]: the smoothing across neighbouring Gaussians that comes before it.
 //! * [`gain`]: the gain map (local exposure) that comes after it.
 //! * [`chroma`]: the chroma map (the colour of what was within the noise of black) after
@@ -26,6 +28,7 @@ pub mod chroma;
 pub mod denoise;
 pub mod gain;
 pub mod mixture;
+pub mod speckle;
 pub mod tone;
 
 #[cfg(feature = "encode")]
@@ -102,8 +105,9 @@ pub fn apply_from(
     rewrite(target, &base, &colors, &record, tone, keep_original)
 }
 
-/// The colours the stored enhancer `record` makes of `scene`'s (spec §7.2): its
-/// denoising first, where it has one, then the mixture, then its gain map, its chroma
+/// The colours the stored enhancer `record` makes of `scene`'s (spec §7.2): its removal
+/// of the Gaussians fitted to noise and its denoising first, where it has them, then the
+/// mixture, then its gain map, its chroma
 /// map and its per-Gaussian tone curve, where it has them. Fails only where the footprint search of the denoising or the curve would
 /// pass `limits`.
 pub fn apply_record(
@@ -118,9 +122,13 @@ pub fn apply_record(
     } else {
         None
     };
+    let colors = match &record.speckle {
+        Some(k) => speckle::apply(scene, &g.colors, k),
+        None => g.colors.clone(),
+    };
     let colors = match (&record.denoise, &nb) {
-        (Some(d), Some(nb)) => nb.denoise(&g.colors, d),
-        _ => g.colors.clone(),
+        (Some(d), Some(nb)) => nb.denoise(&colors, d),
+        _ => colors,
     };
     let colors = Enhancer::from_record(record).apply(&g.positions, &colors);
     let colors = match &record.gain {
@@ -209,6 +217,12 @@ pub fn enhance(
     if !assessment.is_low_light() && !opts.force {
         return Ok(Outcome::NotLowLight(assessment));
     }
+    // The Gaussians fitted to noise go first, so that neither the denoising nor the fit
+    // nor the curve's exposure counts them.
+    let stored_speckle = opts.speckle.then(|| speckle::plan(&scene)).flatten();
+    if let Some(k) = &stored_speckle {
+        scene.gaussians.colors = speckle::apply(&scene, &scene.gaussians.colors, k);
+    }
     // Denoised first, so that the fit sees (and its losses measure) the cleaner image. A
     // scene whose footprints overlap too much for the neighbour search (within `limits`)
     // is enhanced without it, and the caller is told.
@@ -247,6 +261,7 @@ pub fn enhance(
     };
     let mut fitted = fit::fit(&scene, fit_opts, &features::FeatureBank, device, progress);
     fitted.record.denoise = stored_denoise;
+    fitted.record.speckle = stored_speckle;
     fitted.denoise_skipped = skipped;
     // The low image at the working size: the exposure's target and the chroma map read it.
     let low = opts

@@ -28,15 +28,23 @@ pub const ENHANCER_VERSION_GAINED: u8 = 4;
 /// (spec §7.2.4): byte 3 as in layout 4 plus bit 3 (always set; bit 2 may be clear), a
 /// 4-byte [`ChromaMap`] record after the others and a block of scales after the others.
 pub const ENHANCER_VERSION_CHROMA: u8 = 5;
-/// Byte 3 of layouts 3 to 5: a denoise record follows.
+/// `gENH` layout of an enhancer that first removes the Gaussians fitted to noise (spec
+/// §7.2.5): byte 3 as in layout 5 plus bit 4 (always set; bits 0 to 3 may be clear), a
+/// 4-byte [`Speckle`] record after the others and no block.
+pub const ENHANCER_VERSION_SPECKLE: u8 = 6;
+/// Byte 3 of layouts 3 to 6: a denoise record follows.
 pub const RECORD_DENOISE: u8 = 1;
-/// Byte 3 of layouts 3 to 5: a tone record follows (after the denoise record, if any).
+/// Byte 3 of layouts 3 to 6: a tone record follows (after the denoise record, if any).
 pub const RECORD_TONE: u8 = 2;
-/// Byte 3 of layouts 4 and 5: a gain record follows the others, and block 7 holds the gains.
+/// Byte 3 of layouts 4 to 6: a gain record follows the others, and block 7 holds the gains.
 pub const RECORD_GAIN: u8 = 4;
-/// Byte 3 of layout 5: a chroma record follows the others, and the last block holds
-/// the scales.
+/// Byte 3 of layouts 5 and 6: a chroma record follows the others, and the last block
+/// holds the scales.
 pub const RECORD_CHROMA: u8 = 8;
+/// Byte 3 of layout 6: a speckle record follows the others.
+pub const RECORD_SPECKLE: u8 = 16;
+/// Bytes of the speckle record of layout 6.
+pub const SPECKLE_LEN: usize = 4;
 /// Bytes of the chroma record of layout 5.
 pub const CHROMA_LEN: usize = 4;
 /// Bytes of the gain record of layout 4.
@@ -134,6 +142,17 @@ pub struct ChromaMap {
     pub scales: Attribute,
 }
 
+/// The removal of the Gaussians fitted to noise that runs before everything else (spec
+/// §7.2.5): each `sum` colour shrunk by the non-negative garrote `1 − t² / (e·F)` of its
+/// mean square `e` and its footprint's energy `F`, and removed where that is not
+/// positive. What the numbers do is `gsi_enhance::enhance::speckle`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Speckle {
+    /// `t` in `(0, 1]`, in colour units: the noise level times how many of them a
+    /// Gaussian's amplitude must stand above it.
+    pub threshold: f32,
+}
+
 /// A `gENH` chunk: the mixture of colour operators and the weight map that mixes them.
 ///
 /// Every learned number is stored quantized (as an [`Attribute`] of one component, the
@@ -162,8 +181,12 @@ pub struct EnhancerRecord {
     pub tone: Option<Tone>,
     /// Gain map applied after the mixture, before any tone curve (layouts 4 and 5), if any.
     pub gain: Option<GainMap>,
-    /// Chroma map applied after the gain map, before any tone curve (layout 5), if any.
+    /// Chroma map applied after the gain map, before any tone curve (layouts 5 and 6),
+    /// if any.
     pub chroma: Option<ChromaMap>,
+    /// Removal of the Gaussians fitted to noise, before everything else (layout 6), if
+    /// any.
+    pub speckle: Option<Speckle>,
 }
 
 /// Number of values in each of the six tensors of one operator.
@@ -184,11 +207,13 @@ impl EnhancerRecord {
         let records = bit(self.denoise.is_some(), RECORD_DENOISE)
             | bit(self.tone.is_some(), RECORD_TONE)
             | bit(self.gain.is_some(), RECORD_GAIN)
-            | bit(self.chroma.is_some(), RECORD_CHROMA);
+            | bit(self.chroma.is_some(), RECORD_CHROMA)
+            | bit(self.speckle.is_some(), RECORD_SPECKLE);
         // The lowest layout that holds what is stored (spec §7.2).
         let (version, records) = match records {
             0 => (ENHANCER_VERSION, 0),
             RECORD_DENOISE => (ENHANCER_VERSION_DENOISED, 0),
+            r if r & RECORD_SPECKLE != 0 => (ENHANCER_VERSION_SPECKLE, r),
             r if r & RECORD_CHROMA != 0 => (ENHANCER_VERSION_CHROMA, r),
             r if r & RECORD_GAIN == 0 => (ENHANCER_VERSION_TONED, r),
             r => (ENHANCER_VERSION_GAINED, r),
@@ -223,6 +248,9 @@ impl EnhancerRecord {
             out.write_u16::<BigEndian>(c.width)?;
             out.write_u16::<BigEndian>(c.height)?;
         }
+        if let Some(k) = &self.speckle {
+            out.write_f32::<BigEndian>(k.threshold)?;
+        }
         let gains = self.gain.as_ref().map(|g| &g.gains);
         let scales = self.chroma.as_ref().map(|c| &c.scales);
         for a in std::iter::once(&self.map)
@@ -253,6 +281,9 @@ impl EnhancerRecord {
         }
         if let Some(c) = &self.chroma {
             check_chroma(c)?;
+        }
+        if let Some(k) = &self.speckle {
+            check_speckle(k)?;
         }
         for (a, n) in std::iter::once(&self.map)
             .chain(&self.tensors)
@@ -300,12 +331,14 @@ impl EnhancerRecord {
             {
                 r
             }
+            (ENHANCER_VERSION_SPECKLE, r) if r & !0x1f == 0 && r & RECORD_SPECKLE != 0 => r,
             (
                 ENHANCER_VERSION
                 | ENHANCER_VERSION_DENOISED
                 | ENHANCER_VERSION_TONED
                 | ENHANCER_VERSION_GAINED
-                | ENHANCER_VERSION_CHROMA,
+                | ENHANCER_VERSION_CHROMA
+                | ENHANCER_VERSION_SPECKLE,
                 r,
             ) => return Err(invalid(format!("gENH layout {}: byte 3 is {r:#04x}", p[0]))),
             (v, _) => {
@@ -313,22 +346,24 @@ impl EnhancerRecord {
                     ErrorKind::UnsupportedVersion,
                     format!(
                         "gENH layout {v}, this decoder reads {ENHANCER_VERSION} to \
-                         {ENHANCER_VERSION_CHROMA}"
+                         {ENHANCER_VERSION_SPECKLE}"
                     ),
                 ))
             }
         };
-        let (has_denoise, has_tone, has_gain, has_chroma) = (
+        let (has_denoise, has_tone, has_gain, has_chroma, has_speckle) = (
             records & RECORD_DENOISE != 0,
             records & RECORD_TONE != 0,
             records & RECORD_GAIN != 0,
             records & RECORD_CHROMA != 0,
+            records & RECORD_SPECKLE != 0,
         );
         let denoise_at = ENHANCER_FIXED_LEN;
         let tone_at = denoise_at + if has_denoise { DENOISE_LEN } else { 0 };
         let gain_at = tone_at + if has_tone { TONE_LEN } else { 0 };
         let chroma_at = gain_at + if has_gain { GAIN_LEN } else { 0 };
-        let blocks_at = chroma_at + if has_chroma { CHROMA_LEN } else { 0 };
+        let speckle_at = chroma_at + if has_chroma { CHROMA_LEN } else { 0 };
+        let blocks_at = speckle_at + if has_speckle { SPECKLE_LEN } else { 0 };
         if p.len() < blocks_at {
             return Err(Error::new(
                 ErrorKind::BadChunkLength,
@@ -376,6 +411,15 @@ impl EnhancerRecord {
             };
             check_tone(&t)?;
             Some(t)
+        } else {
+            None
+        };
+        let speckle = if has_speckle {
+            let k = Speckle {
+                threshold: f32_at(speckle_at),
+            };
+            check_speckle(&k)?;
+            Some(k)
         } else {
             None
         };
@@ -477,6 +521,7 @@ impl EnhancerRecord {
             tone,
             gain,
             chroma,
+            speckle,
         })
     }
 }
@@ -562,6 +607,17 @@ fn check_denoise(d: &Denoise) -> Result<()> {
         return Err(invalid(format!(
             "gENH denoise: range {}, strength {}, {} passes",
             d.range, d.strength, d.passes
+        )));
+    }
+    Ok(())
+}
+
+/// Spec §7.2.5: a threshold in `(0, 1]` (NaN refused).
+fn check_speckle(k: &Speckle) -> Result<()> {
+    if !(k.threshold > 0.0 && k.threshold <= 1.0) {
+        return Err(invalid(format!(
+            "gENH speckle: threshold {}, allowed (0, 1]",
+            k.threshold
         )));
     }
     Ok(())

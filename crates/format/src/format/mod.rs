@@ -23,9 +23,9 @@ mod writer;
 pub use chunk::{chunk_crc, ChunkInfo, ChunkType, RawChunk, SIGNATURE};
 pub use edit::ChunkedFile;
 pub use enhancer::{
-    tensor_sizes, ChromaMap, Denoise, EnhancerRecord, FitSettings, GainMap, OriginalColors, Tone,
-    MAX_DENOISE_PASSES, MAX_EXPERTS, MAX_GAIN, MAX_HIDDEN, MAX_TONE_EXPONENT, MAX_TONE_PASSES,
-    TENSORS,
+    tensor_sizes, ChromaMap, Denoise, EnhancerRecord, FitSettings, GainMap, OriginalColors,
+    Speckle, Tone, MAX_DENOISE_PASSES, MAX_EXPERTS, MAX_GAIN, MAX_HIDDEN, MAX_TONE_EXPONENT,
+    MAX_TONE_PASSES, TENSORS,
 };
 pub use error::{Error, ErrorKind, Result};
 pub use header::{
