@@ -36,8 +36,21 @@ fuzz_target!(|data: &[u8]| {
         [64.0, -64.0, 0.0],
         [0.0; 3],
     ];
-    // A small scene of these Gaussians with covariances `cov`.
-    let scene_of = |blend, cov: Vec<[f32; 3]>| Scene {
+    // A small scene of these Gaussians with covariances `cov`: odd shapes, or (for the
+    // speckle removal) a degenerate one, one far larger than the image and a NaN.
+    let odd = [
+        [0.1, 0.0, 0.1],
+        [0.0; 3],
+        [16.0, -16.0, 16.0],
+        [0.2, 0.1, 0.0],
+    ];
+    let extreme = [
+        [0.1, 0.0, 0.1],
+        [0.0; 3],
+        [1e19, -1e19, 1e19],
+        [f32::NAN, 0.1, 0.0],
+    ];
+    let scene_of = |blend, cov: &[[f32; 3]]| Scene {
         tone: None,
         width: 7,
         height: 5,
@@ -45,7 +58,7 @@ fuzz_target!(|data: &[u8]| {
         cov_param: CovParam::Cholesky,
         gaussians: GaussianSet {
             positions: positions.to_vec(),
-            cov,
+            cov: cov.to_vec(),
             colors: colors.to_vec(),
             opacity: None,
         },
@@ -55,15 +68,7 @@ fuzz_target!(|data: &[u8]| {
     // in both blend modes.
     if record.denoise.is_some() || record.tone.is_some() {
         for blend in [Blend::Sum, Blend::Alpha] {
-            let scene = scene_of(
-                blend,
-                vec![
-                    [0.1, 0.0, 0.1],
-                    [0.0; 3],
-                    [16.0, -16.0, 16.0],
-                    [0.2, 0.1, 0.0],
-                ],
-            );
+            let scene = scene_of(blend, &odd);
             if let Some(d) = &record.denoise {
                 let out = gsi::enhance::denoise::denoise(&scene, &colors, d, &common::limits())
                     .expect("four Gaussians are within the limits");
@@ -81,19 +86,11 @@ fuzz_target!(|data: &[u8]| {
             }
         }
     }
-    // Layout 6: the speckle removal (spec §7.2.5) over odd footprints (a degenerate one,
-    // one far larger than the image, a NaN) shrinks colours towards 0, never past it.
+    // Layout 6: the speckle removal (spec §7.2.5) over extreme footprints shrinks
+    // colours towards 0, never past it.
     if let Some(k) = &record.speckle {
         for blend in [Blend::Sum, Blend::Alpha] {
-            let scene = scene_of(
-                blend,
-                vec![
-                    [0.1, 0.0, 0.1],
-                    [0.0; 3],
-                    [1e19, -1e19, 1e19],
-                    [f32::NAN, 0.1, 0.0],
-                ],
-            );
+            let scene = scene_of(blend, &extreme);
             for (out, c) in gsi::enhance::speckle::apply(&scene, &colors, k)
                 .iter()
                 .zip(colors)
