@@ -107,8 +107,8 @@ pub fn apply_from(
 
 /// The colours the stored enhancer `record` makes of `scene`'s (spec §7.2): its removal
 /// of the Gaussians fitted to noise and its denoising first, where it has them, then the
-/// mixture, then its gain map, its chroma
-/// map and its per-Gaussian tone curve, where it has them. Fails only where the footprint search of the denoising or the curve would
+/// mixture, then its gain map, its chroma map and its per-Gaussian tone curve, where it
+/// has them. Fails only where the footprint search of the denoising or the curve would
 /// pass `limits`.
 pub fn apply_record(
     record: &EnhancerRecord,
