@@ -52,14 +52,16 @@ pub struct Neighbours {
     footprint: Vec<f32>,
 }
 
-/// Covariance in pixels of the reference size: `[σuu·W·W, σuv·W·H, σvv·H·H]`.
-fn pixel_cov(scene: &Scene, i: usize) -> [f32; 3] {
+/// Covariance in pixels of the reference size: `[σuu·W·W, σuv·W·H, σvv·H·H]` (spec
+/// §7.2.1 step 1, which §7.2.5 reads too).
+pub(crate) fn pixel_cov(scene: &Scene, i: usize) -> [f32; 3] {
     let [a, b, c] = scene.cov_param.covariance(scene.gaussians.cov[i]);
     let (w, h) = (scene.width as f32, scene.height as f32);
     [a * w * w, b * w * h, c * h * h]
 }
 
-fn det(s: [f32; 3]) -> f32 {
+/// `max(S0·S2 − S1·S1, 1e-12)`, spec §7.2.1 step 1.
+pub(crate) fn det(s: [f32; 3]) -> f32 {
     (s[0] * s[2] - s[1] * s[1]).max(1e-12)
 }
 

@@ -19,6 +19,7 @@
 //! image's shading) and strong small ones (edges, texture of a lit region) keep their
 //! colour; in a bright photograph almost nothing changes.
 
+use super::denoise::{det, pixel_cov};
 use gsi_format::format::Speckle;
 use gsi_format::model::{Blend, Scene};
 
@@ -33,20 +34,14 @@ pub fn apply(scene: &Scene, colors: &[[f32; 3]], speckle: &Speckle) -> Vec<[f32;
     if scene.blend != Blend::Sum {
         return colors.to_vec();
     }
-    let (w, h) = (scene.width as f32, scene.height as f32);
     let t = speckle.threshold;
     let tt = t * t;
-    scene
-        .gaussians
-        .cov
+    colors
         .iter()
-        .zip(colors)
-        .map(|(&p, c)| {
-            let [suu, suv, svv] = scene.cov_param.covariance(p);
-            let a0 = suu * w * w + PIXEL_VARIANCE;
-            let a1 = suv * w * h;
-            let a2 = svv * h * h + PIXEL_VARIANCE;
-            let d = (a0 * a2 - a1 * a1).max(1e-12);
+        .enumerate()
+        .map(|(i, c)| {
+            let [s0, s1, s2] = pixel_cov(scene, i);
+            let d = det([s0 + PIXEL_VARIANCE, s1, s2 + PIXEL_VARIANCE]);
             let f = std::f32::consts::PI * d.sqrt();
             let e = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]) / 3.0;
             let z = e * f;
