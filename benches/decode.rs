@@ -6,7 +6,7 @@
 
 use criterion::{criterion_group, criterion_main, Criterion, SamplingMode};
 use gsi::format::{read_file, to_bytes, BitDepths, Limits, Records, WriteOptions};
-use gsi::model::Blend;
+use gsi::model::{Blend, WeightRule};
 use gsi::render::{render_into, render_rgb8_into};
 use gsi::synth::{random_scene, SceneSpec};
 use std::hint::black_box;
@@ -44,16 +44,32 @@ fn render_cpu(c: &mut Criterion) {
         .sampling_mode(SamplingMode::Flat);
     let mut out = vec![0.0f32; (WIDTH * HEIGHT * 3) as usize];
     for blend in [Blend::Sum, Blend::Alpha] {
-        for (name, n) in COUNTS {
-            let scene = random_scene(2, SceneSpec::new(WIDTH, HEIGHT, n, blend));
-            group.bench_function(format!("{}/{name}", blend.name()), |b| {
-                b.iter(|| {
-                    render_into(black_box(&scene), WIDTH, HEIGHT, &mut out).expect("valid size")
-                })
-            });
+        for (rule, rule_name) in RULES {
+            for (name, n) in COUNTS {
+                let scene = scene(n, blend, rule);
+                group.bench_function(format!("{}/{rule_name}/{name}", blend.name()), |b| {
+                    b.iter(|| {
+                        render_into(black_box(&scene), WIDTH, HEIGHT, &mut out).expect("valid size")
+                    })
+                });
+            }
         }
     }
     group.finish();
+}
+
+/// The two weight rules of spec §6.3: files an encoder writes now weigh by columns
+/// (`GCRW`), older ones per pixel.
+const RULES: [(WeightRule, &str); 2] = [
+    (WeightRule::Columns, "columns"),
+    (WeightRule::PerPixel, "per-pixel"),
+];
+
+/// A random scene of `n` Gaussians at 768×512 (σ 0.5–8 px) weighed by `rule`.
+fn scene(n: usize, blend: Blend, rule: WeightRule) -> gsi::Scene {
+    let mut spec = SceneSpec::new(WIDTH, HEIGHT, n, blend);
+    spec.weights = rule;
+    random_scene(2, spec)
 }
 
 /// A 12-MP decode into 8-bit RGB (4240×2832, the size of a phone's photograph) of a
@@ -68,10 +84,12 @@ fn render_cpu_12mp(c: &mut Criterion) {
     let (w, h) = (4240, 2832);
     let mut out = vec![0u8; (w * h * 3) as usize];
     for blend in [Blend::Sum, Blend::Alpha] {
-        let scene = random_scene(2, SceneSpec::new(WIDTH, HEIGHT, 10_000, blend));
-        group.bench_function(format!("{}/10k", blend.name()), |b| {
-            b.iter(|| render_rgb8_into(black_box(&scene), w, h, &mut out).expect("valid size"))
-        });
+        for (rule, rule_name) in RULES {
+            let scene = scene(10_000, blend, rule);
+            group.bench_function(format!("{}/{rule_name}/10k", blend.name()), |b| {
+                b.iter(|| render_rgb8_into(black_box(&scene), w, h, &mut out).expect("valid size"))
+            });
+        }
     }
     group.finish();
 }

@@ -4,6 +4,7 @@
 //! figures.
 
 use crate::format::{ChunkType, CompressionMeta, EnhancerRecord, GsiFile, Limits, OriginalColors};
+use crate::model::WeightRule;
 use serde_json::json;
 
 /// Ratios measured on the file as read (the stored `gCRM` may describe an older write).
@@ -101,6 +102,7 @@ pub fn to_json(f: &GsiFile) -> serde_json::Value {
         "cov_param": h.cov_param.name(),
         "color_space": "srgb",
         "opacity": r.opacity.is_some(),
+        "weights": r.weights.name(),
         "importance_ordered": h.flags & crate::format::FLAG_IMPORTANCE_ORDERED != 0,
         "file_bytes": f.file_bytes,
         "bpp": finite_or_null(m.bpp),
@@ -165,7 +167,7 @@ pub fn to_text(f: &GsiFile) -> String {
     let h = &f.records.header;
     let m = measured(f);
     let mut s = format!(
-        "{}x{} pixels, {} Gaussians, {} blending, {} covariance{}\n\
+        "{}x{} pixels, {} Gaussians, {} blending, {} covariance{}, weights {}\n\
          {} bytes: {:.3} bpp, Cr {:.1}x by parameters (Eq. 10, {} per Gaussian), {:.1}x by bytes\n",
         h.width,
         h.height,
@@ -176,6 +178,10 @@ pub fn to_text(f: &GsiFile) -> String {
             ", opacity"
         } else {
             ""
+        },
+        match f.records.weights {
+            WeightRule::Columns => "by columns (GCRW)",
+            WeightRule::PerPixel => "per pixel",
         },
         f.file_bytes,
         m.bpp,

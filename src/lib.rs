@@ -123,5 +123,5 @@ pub mod capi;
 pub use device::Device;
 pub use format::{Error, ErrorKind, Header, Limits, Result};
 pub use gsi_render::decode::{decode, scaled_size, Image, PixelFormat, Reader};
-pub use model::{Blend, CovParam, GaussianSet, Scene};
+pub use model::{Blend, CovParam, GaussianSet, Scene, WeightRule};
 pub use render::{render, RgbImage};

@@ -25,7 +25,7 @@ pub fn corpus() -> Vec<CorpusFile> {
 mod corpus {
     use super::{random_scene, CorpusFile, SceneSpec};
     use crate::format::{self, BitDepths, ChunkType, ErrorKind, RawChunk, Records, WriteOptions};
-    use crate::model::{Blend, CovParam, GaussianSet, Scene};
+    use crate::model::{Blend, CovParam, GaussianSet, Scene, WeightRule};
 
     fn write(records: &Records, settings: &str) -> Vec<u8> {
         let opts = WriteOptions {
@@ -300,6 +300,34 @@ mod corpus {
         let mut records = random(14, SceneSpec::new(40, 30, 100, Blend::Sum));
         records.tone = Some(three_curves());
         out.push(valid_file("tone-curve-3-curves-sum-100", &records));
+        // The column rule (GCRW, spec §6.3.2), as every encoder of version 1.4 writes it:
+        // both blend modes over several bands of rows, thin and steep Gaussians (σ from
+        // 0.05 px, which the rule weighs per pixel), and degenerate covariances.
+        let columns = |seed, w, h, n, blend, cov_param, with_opacity, sigma_px| {
+            let scene = random_scene(
+                seed,
+                SceneSpec {
+                    sigma_px,
+                    weights: WeightRule::Columns,
+                    ..spec(w, h, n, blend, cov_param, with_opacity)
+                },
+            );
+            Records::from_scene(&scene, BitDepths::default())
+        };
+        out.push(valid_file(
+            "columns-sum-lsr-800",
+            &columns(18, 96, 80, 800, Sum, Lsr, false, (0.05, 12.0)),
+        ));
+        out.push(valid_file(
+            "columns-alpha-cholesky-500-opacity",
+            &columns(19, 80, 72, 500, Alpha, Cholesky, true, (0.05, 12.0)),
+        ));
+        let mut degenerate_columns = degenerate(Lsr);
+        degenerate_columns.weights = WeightRule::Columns;
+        out.push(valid_file(
+            "columns-degenerate-covariances",
+            &degenerate_columns,
+        ));
         out
     }
 
@@ -440,6 +468,7 @@ mod corpus {
             opacity: Some((0..n).map(|i| (i % 4) as f32 / 3.0).collect()),
         };
         let scene = Scene {
+            weights: crate::model::WeightRule::PerPixel,
             tone: None,
             width: 24,
             height: 16,
@@ -554,6 +583,19 @@ mod corpus {
                 "duplicate-gtrc",
                 with_trc(&[good.clone(), good.clone()]),
             ));
+        }
+        // GCRW (spec §6.3.2), critical and empty: a payload, or a second one, refuses
+        // the file.
+        {
+            let with_crw = |payloads: &[&[u8]]| {
+                let mut p = parts.clone();
+                for (k, d) in payloads.iter().enumerate() {
+                    p.insert(1 + k, (ChunkType::COLUMN_WEIGHTS, d.to_vec()));
+                }
+                assemble(&p)
+            };
+            files.push((K::BadChunkLength, "gcrw-1-byte", with_crw(&[&[0]])));
+            files.push((K::ChunkOrder, "duplicate-gcrw", with_crw(&[&[], &[]])));
         }
         files.push((
             K::Truncated,

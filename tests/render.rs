@@ -218,6 +218,7 @@ fn hand_built(blend: Blend, cov_param: CovParam, gaussians: &[Hand]) -> Scene {
     }
     g.opacity = Some(gaussians.iter().map(|x| x.3).collect());
     Scene {
+        weights: gsi::model::WeightRule::PerPixel,
         tone: None,
         width: 20,
         height: 16,

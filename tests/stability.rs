@@ -34,6 +34,7 @@ type Raw = ([f32; 2], [f32; 3], [f32; 3], f32);
 
 fn scene(blend: Blend, cov_param: CovParam, g: Vec<Raw>, opacity: bool) -> Scene {
     Scene {
+        weights: gsi::model::WeightRule::PerPixel,
         tone: None,
         width: 17,
         height: 11,
@@ -111,7 +112,7 @@ proptest! {
         let top = q.max_code();
         let codes = |c: usize| -> Vec<u32> { (0..4).map(|i| if (i + c) % 2 == 0 { 0 } else { top }).collect() };
         let attr = |k: usize| Attribute { quantizers: vec![q; k], codes: (0..k).flat_map(codes).collect() };
-        let records = Records { tone: None,
+        let records = Records { tone: None, weights: gsi::WeightRule::PerPixel,
             header: format::Header::new(9, 7, 4, blend, cp),
             positions: attr(2),
             covariance: attr(3),

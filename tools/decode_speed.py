@@ -12,6 +12,9 @@ Usage:
   tools/decode_speed.py --gsi target/release/gsi [--gsi-before OLD/gsi] \\
       --pair kodim23.gsi=kodim23.png [--pair ...] [--rounds 15] [--json out.json]
 
+With `--pair NEW.gsi,OLD.gsi=SOURCE.png` the earlier build decodes OLD.gsi (the file its
+own encoder wrote) and the JPEG and WebP budgets are NEW.gsi's size.
+
 cjpeg, djpeg, cwebp and dwebp come from PATH (Debian: libjpeg-turbo-progs, webp);
 Pillow converts the PNG for cjpeg.
 """
@@ -60,7 +63,8 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--gsi", required=True)
     ap.add_argument("--gsi-before")
-    ap.add_argument("--pair", action="append", required=True, help="FILE.gsi=SOURCE.png")
+    ap.add_argument("--pair", action="append", required=True,
+                    help="FILE.gsi=SOURCE.png, or FILE.gsi,BEFORE.gsi=SOURCE.png")
     ap.add_argument("--rounds", type=int, default=15)
     ap.add_argument("--json")
     a = ap.parse_args()
@@ -69,7 +73,9 @@ def main():
     out = os.path.join(tmp, "out.ppm")
     report = []
     for pair in a.pair:
-        gsi_file, png = pair.split("=", 1)
+        files, png = pair.split("=", 1)
+        gsi_file, _, before_file = files.partition(",")
+        before_file = before_file or gsi_file
         budget = os.path.getsize(gsi_file)
         subprocess.run([a.gsi, "decode", gsi_file, "-o", out], check=True)
         # cjpeg reads PPM, not PNG.
@@ -95,7 +101,7 @@ def main():
             "dwebp": ["dwebp", webp, "-ppm", "-o", out],
         }
         if a.gsi_before:
-            decoders["gsi-before"] = [a.gsi_before, "decode", gsi_file, "-o", out, "--device", "cpu"]
+            decoders["gsi-before"] = [a.gsi_before, "decode", before_file, "-o", out, "--device", "cpu"]
         times = {k: [] for k in decoders}
         for _ in range(a.rounds):
             for k, cmd in decoders.items():

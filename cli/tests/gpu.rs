@@ -496,6 +496,7 @@ fn a_resident_scene_survives_degenerate_gaussians() {
                 gaussians.opacity.as_mut().unwrap()[3] = f32::NAN;
             }
             let scene = Scene {
+                weights: gsi::model::WeightRule::PerPixel,
                 tone: None,
                 width: 40,
                 height: 30,

@@ -104,6 +104,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // A regular grid of near-identical Gaussians compresses, so its payloads are zstd.
     let n = 16;
     let grid = Scene {
+        weights: gsi::model::WeightRule::PerPixel,
+        tone: None,
         width: 64,
         height: 64,
         blend: Blend::Alpha,
@@ -133,6 +135,18 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "zstd".into(),
         to_bytes(&Records::from_scene(&grid, BitDepths::default()), &opts)?,
     ));
+    // Weights by the column rule (GCRW, spec §6.3.2), as the encoder writes files now:
+    // thin Gaussians (σ from 0.05 px) over more than one band of rows.
+    for (name, blend, seed) in [
+        ("columns-sum", Sum, 0x5eed_c0),
+        ("columns-alpha", Alpha, 0x5eed_c1),
+    ] {
+        let mut spec = SceneSpec::new(40, 36, 40, blend);
+        spec.sigma_px = (0.05, 10.0);
+        spec.weights = gsi::model::WeightRule::Columns;
+        let records = Records::from_scene(&random_scene(seed, spec), DEFAULT);
+        seeds.push((name.into(), to_bytes(&records, &WriteOptions::default())?));
+    }
 
     for (i, (name, bytes)) in seeds.iter().enumerate() {
         std::fs::write(parse_dir.join(format!("{name}.gsi")), bytes)?;

@@ -79,8 +79,8 @@ fuzz_target!(|data: &[u8]| {
     }
 });
 
-/// Spec §6.4, one pixel at a time over every projected Gaussian in stored order, then
-/// the file's tone curve (§6.6).
+/// Spec §6.3–6.4 (by the file's weight rule), one pixel at a time over every projected
+/// Gaussian in stored order, then the file's tone curve (§6.6).
 fn reference(scene: &Scene, width: u32, height: u32) -> Vec<f32> {
     let proj = project_scene(scene, width, height);
     let mut out = Vec::with_capacity((width * height * 3) as usize);
@@ -89,7 +89,7 @@ fn reference(scene: &Scene, width: u32, height: u32) -> Vec<f32> {
             let mut c = [0f32; 3];
             let mut t = 1f32;
             for g in &proj {
-                let Some(alpha) = g.alpha_at(i, j, scene.blend) else {
+                let Some(alpha) = g.weight_at(i, j, scene.blend, scene.weights) else {
                     continue;
                 };
                 match scene.blend {

@@ -51,6 +51,7 @@ fuzz_target!(|data: &[u8]| {
         [f32::NAN, 0.1, 0.0],
     ];
     let scene_of = |blend, cov: &[[f32; 3]]| Scene {
+        weights: gsi::model::WeightRule::PerPixel,
         tone: None,
         width: 7,
         height: 5,

@@ -55,6 +55,7 @@ fuzz_target!(|input: Input| {
         })
         .collect();
     let scene = Scene {
+        weights: gsi::model::WeightRule::PerPixel,
         tone: None,
         width: side(input.width),
         height: side(input.height),

@@ -238,9 +238,11 @@ def read(data: Data) -> Dict[str, Any]:
     ``"log-scale-rotation"``: ``(ln σ1, ln σ2, θ)``), ``positions`` (N×2 float32, ``(u, v)``
     = ``(x / W, y / H)``), ``cov`` (N×3, the covariance parameters as stored),
     ``covariance`` (N×2×2, the matrix in the same normalized units, under the format's
-    clamps), ``colors`` (N×3, sRGB-encoded), ``opacity`` (N, or None: all 1) and ``tone``
+    clamps), ``colors`` (N×3, sRGB-encoded), ``opacity`` (N, or None: all 1), ``tone``
     (None, or the tone curve every blended value goes through: a ``uint16`` array of 1 or 3
-    rows of knots). :func:`render` of this dict, edited or not, renders it; ``covariance``
+    rows of knots) and ``weights`` (``"columns"``, the rule of the files written since
+    format 1.4, or ``"per-pixel"``: how a Gaussian's weight at a pixel is computed, which
+    moves rare 8-bit values by one step). :func:`render` of this dict, edited or not, renders it; ``covariance``
     is derived and not read back.
     """
     d = _gsi.read(_bytes(data))
@@ -259,6 +261,7 @@ def read(data: Data) -> Dict[str, Any]:
         "height": d["height"],
         "blend": d["blend"],
         "cov_param": d["cov_param"],
+        "weights": d["weights"],
         "positions": rows("positions", 2),
         "cov": rows("cov", 3),
         "covariance": covariance,
@@ -282,7 +285,7 @@ def render(
     ``width`` and ``height`` default to the scene's stored size, and one of them alone
     keeps its aspect ratio, as in :func:`decode`; ``render(read(f), w, h)`` gives exactly
     ``decode(f, width=w, height=h)``. Values are taken as float32; ``opacity`` and
-    ``tone`` may be None.
+    ``tone`` may be None, and ``weights`` left out is ``"columns"``.
     """
     dt = np.dtype(dtype)
     if dt not in (np.uint8, np.float32, np.float64):
@@ -307,6 +310,7 @@ def render(
         int(scene["height"]),
         str(scene["blend"]),
         str(scene["cov_param"]),
+        str(scene.get("weights", "columns")),
         f32("positions", 2),
         f32("cov", 3),
         f32("colors", 3),

@@ -12,7 +12,7 @@ use gsi::enhance as stage2;
 use gsi::enhance::fit::EnhanceOptions;
 use gsi::fit::{self, Budget, EncodeOptions};
 use gsi::format::{ChunkedFile, Limits};
-use gsi::model::{Blend, CovParam, GaussianSet, Scene, ToneCurve};
+use gsi::model::{Blend, CovParam, GaussianSet, Scene, ToneCurve, WeightRule};
 use gsi::{PixelFormat, Reader};
 use pyo3::create_exception;
 use pyo3::exceptions::PyValueError;
@@ -126,6 +126,13 @@ fn blend_named(name: &str) -> Result<Blend, String> {
         .into_iter()
         .find(|b| b.name() == name)
         .ok_or_else(|| format!("blend {name:?}: expected \"sum\" or \"alpha\""))
+}
+
+fn weights_named(name: &str) -> Result<WeightRule, String> {
+    [WeightRule::Columns, WeightRule::PerPixel]
+        .into_iter()
+        .find(|w| w.name() == name)
+        .ok_or_else(|| format!("weights {name:?}: expected \"columns\" or \"per-pixel\""))
 }
 
 fn cov_param_named(name: &str) -> Result<CovParam, String> {
@@ -396,6 +403,7 @@ fn read<'py>(py: Python<'py>, data: &[u8]) -> PyResult<Bound<'py, PyDict>> {
     d.set_item("height", scene.height)?;
     d.set_item("blend", scene.blend.name())?;
     d.set_item("cov_param", scene.cov_param.name())?;
+    d.set_item("weights", scene.weights.name())?;
     d.set_item("positions", f32_bytes(py, &g.positions))?;
     d.set_item("cov", f32_bytes(py, &g.cov))?;
     d.set_item("covariance", f32_bytes(py, &matrices))?;
@@ -441,7 +449,7 @@ fn rows<const K: usize>(name: &str, bytes: &[u8], n: usize) -> Result<Vec<[f32; 
 /// A scene from its parts (as [`read`] gives them, perhaps edited), rendered as [`decode`]
 /// renders a file, at the size it sizes one: the pixels and their size.
 #[pyfunction]
-#[pyo3(signature = (width, height, blend, cov_param, positions, cov, colors, opacity, tone, out_width=None, out_height=None, float=false))]
+#[pyo3(signature = (width, height, blend, cov_param, weights, positions, cov, colors, opacity, tone, out_width=None, out_height=None, float=false))]
 #[allow(clippy::too_many_arguments)]
 fn render<'py>(
     py: Python<'py>,
@@ -449,6 +457,7 @@ fn render<'py>(
     height: u32,
     blend: &str,
     cov_param: &str,
+    weights: &str,
     positions: &[u8],
     cov: &[u8],
     colors: &[u8],
@@ -470,6 +479,7 @@ fn render<'py>(
             ),
         };
         Ok(Scene {
+            weights: weights_named(weights)?,
             width,
             height,
             blend: blend_named(blend)?,

@@ -232,6 +232,25 @@ def test_read_and_render_agree_with_decode(encoded, dark_encoded):
     assert gsi.read(alpha)["blend"] == "alpha" and gsi.read(alpha)["opacity"] is not None
 
 
+@pytest.mark.parametrize(
+    "name, weights",
+    [("sum-lsr-3000.gsi", "per-pixel"), ("columns-sum-lsr-800.gsi", "columns")],
+)
+def test_read_keeps_the_weight_rule_of_older_files(name, weights):
+    from pathlib import Path
+
+    data = (Path(__file__).resolve().parents[2] / "corpus" / "valid" / name).read_bytes()
+    s = gsi.read(data)
+    assert s["weights"] == weights
+    assert np.array_equal(gsi.render(s, dtype=np.float32), gsi.decode(data, dtype=np.float32))
+    other = dict(s, weights="columns" if weights == "per-pixel" else "per-pixel")
+    assert not np.array_equal(
+        gsi.render(other, dtype=np.float32), gsi.decode(data, dtype=np.float32)
+    )
+    with pytest.raises(gsi.Error, match="weights"):
+        gsi.render(dict(s, weights="rows"))
+
+
 def test_an_edited_scene_renders_the_edit(encoded):
     s = gsi.read(encoded)
     s["colors"][:] = 0

@@ -22,7 +22,7 @@ fn median_ms(runs: usize, mut f: impl FnMut()) -> f64 {
 /// regenerates the figures (criterion's `cargo bench --bench decode` measures the same).
 pub fn section(stamp: &(String, String)) -> String {
     use gsi::format::{BitDepths, Limits, Records, WriteOptions};
-    use gsi::model::Blend;
+    use gsi::model::{Blend, WeightRule};
     use gsi::synth::{random_scene, SceneSpec};
     use std::fmt::Write;
     let mut s = String::new();
@@ -38,9 +38,18 @@ pub fn section(stamp: &(String, String)) -> String {
         s,
         "| benchmark | 10k Gaussians | 100k Gaussians |\n|---|---|---|"
     );
-    let scenes =
-        |blend| [10_000usize, 100_000].map(|n| random_scene(1, SceneSpec::new(768, 512, n, blend)));
-    let parse: Vec<f64> = scenes(Blend::Sum)
+    let scenes = |blend, weights| {
+        [10_000usize, 100_000].map(|n| {
+            random_scene(
+                1,
+                SceneSpec {
+                    weights,
+                    ..SceneSpec::new(768, 512, n, blend)
+                },
+            )
+        })
+    };
+    let parse: Vec<f64> = scenes(Blend::Sum, WeightRule::Columns)
         .iter()
         .map(|scene| {
             let bytes = gsi::format::to_bytes(
@@ -63,8 +72,18 @@ pub fn section(stamp: &(String, String)) -> String {
         "| parse + dequantize | {:.2} ms | {:.2} ms |",
         parse[0], parse[1]
     );
-    for blend in [Blend::Sum, Blend::Alpha] {
-        let t: Vec<f64> = scenes(blend)
+    let rules = [
+        (
+            WeightRule::Columns,
+            "by columns (§6.3.2, files written now)",
+        ),
+        (WeightRule::PerPixel, "per pixel (§6.3, files before 1.4)"),
+    ];
+    for (blend, (rule, rule_name)) in [Blend::Sum, Blend::Alpha]
+        .into_iter()
+        .flat_map(|b| rules.map(|r| (b, r)))
+    {
+        let t: Vec<f64> = scenes(blend, rule)
             .iter()
             .map(|scene| {
                 median_ms(21, || {
@@ -76,7 +95,7 @@ pub fn section(stamp: &(String, String)) -> String {
             .collect();
         let _ = writeln!(
             s,
-            "| render CPU, `{}`, 768×512 | {:.2} ms | {:.1} ms |",
+            "| render CPU, `{}`, weights {rule_name}, 768×512 | {:.2} ms | {:.1} ms |",
             blend.name(),
             t[0],
             t[1]

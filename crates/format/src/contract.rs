@@ -36,6 +36,24 @@ pub const TRANSMITTANCE_MIN: f32 = 1e-4;
 /// displayable colours are in `[0, 1]` and fitted ones stay within a few units.
 pub const COLOR_MAX: f32 = 64.0;
 
+/// Rows of a band of the column rule (§6.3.2): in every band of this many output rows,
+/// from row 0, a Gaussian's weights down a pixel column start again from `E` at the first
+/// row of its box, so that no weight is more than 15 products away from an `E`, and a
+/// decoder that renders tiles of 16 rows never carries a weight from one tile to the next.
+pub const COLUMN_BAND: u32 = 16;
+/// `2^-80`: a weight of the column rule below it is no longer carried down its column
+/// (§6.3.2); the lane waits, dark, until its power reaches [`COLUMN_START`]. Carried
+/// weights stay far above `E`'s floor, and clear of the slow subnormal range.
+pub const COLUMN_DARK: f32 = f32::from_bits(0x1780_0000);
+/// The power at or above which a dark lane of the column rule starts from `E` (§6.3.2):
+/// `e^-55` is above [`COLUMN_DARK`], so a lane started is carried, and its next step
+/// is below 55, inside `E`'s range.
+pub const COLUMN_START: f32 = -55.0;
+/// A Gaussian whose `C` exceeds this is weighed per pixel by §6.3 under the column rule
+/// too: `E(−C)` must stay far from `E`'s floor of −87, and so steep a column (a standard
+/// deviation under 0.13 px) spans a row or two of a band.
+pub const COLUMN_STEEP: f32 = 60.0;
+
 /// The `exp` of spec §6.3, `E` of §6.3.1: `e^x` for `x` clamped to `[-87, 88]`, within
 /// one ulp of the true value on `[-87, 0]` (0.98 at worst, test `exp_is_within_1_ulp`).
 /// `x = n·ln 2 + r` with `n` the nearest integer (ties to even) and `|r| <= ln 2 / 2`, a

@@ -137,6 +137,31 @@ pub struct Scene {
     /// The tone curve every blended value goes through before it is shown (spec §6.6,
     /// `GTRC`); `None` shows the blended values as they are.
     pub tone: Option<ToneCurve>,
+    /// How a Gaussian's weight at a pixel is computed (a file with `GCRW` says
+    /// [`WeightRule::Columns`]).
+    pub weights: WeightRule,
+}
+
+/// How a Gaussian's weight at each pixel is computed: the two rules of spec §6.3, which
+/// differ in the last bits of a weight and so, rarely, by one step of an 8-bit value.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum WeightRule {
+    /// `E(power)` at every pixel (§6.3): files without a `GCRW` chunk.
+    PerPixel,
+    /// Down each pixel column by two products a row from an `E` at the first row of each
+    /// band of 16 rows (§6.3.2): files with a `GCRW` chunk, which every encoder of version
+    /// 1.4 writes. A CPU decoder needs about half the arithmetic per pixel.
+    Columns,
+}
+
+impl WeightRule {
+    /// `"per-pixel"` or `"columns"`, as `gsi info --json` and the Python package say it.
+    pub fn name(self) -> &'static str {
+        match self {
+            WeightRule::PerPixel => "per-pixel",
+            WeightRule::Columns => "columns",
+        }
+    }
 }
 
 /// Most knots a [`ToneCurve`] may have (spec §6.6).

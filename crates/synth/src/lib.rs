@@ -4,7 +4,7 @@
 //! The generator is the project's own `SplitMix64` (`gsi_optim::rng`), so that the
 //! checked-in corpus and its golden hashes never change with a dependency upgrade.
 
-use gsi_format::model::{Blend, CovParam, GaussianSet, Scene};
+use gsi_format::model::{Blend, CovParam, GaussianSet, Scene, WeightRule};
 pub use gsi_optim::rng::SplitMix64;
 
 /// Shape of a random scene.
@@ -18,6 +18,8 @@ pub struct SceneSpec {
     pub with_opacity: bool,
     /// Standard deviations are log-uniform in this range, in pixels of the reference size.
     pub sigma_px: (f32, f32),
+    /// The weight rule of the scene (per pixel by default, as the corpus's older files).
+    pub weights: WeightRule,
 }
 
 impl SceneSpec {
@@ -30,6 +32,7 @@ impl SceneSpec {
             cov_param: CovParam::LogScaleRotation,
             with_opacity: blend == Blend::Alpha,
             sigma_px: (0.5, 8.0),
+            weights: WeightRule::PerPixel,
         }
     }
 }
@@ -74,5 +77,6 @@ pub fn random_scene(seed: u64, spec: SceneSpec) -> Scene {
         blend: spec.blend,
         cov_param: spec.cov_param,
         gaussians: g,
+        weights: spec.weights,
     }
 }

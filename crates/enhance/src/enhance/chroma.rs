@@ -188,6 +188,7 @@ mod tests {
                 }
             }
             Scene {
+                weights: gsi_format::model::WeightRule::PerPixel,
                 width: 160,
                 height: 120,
                 blend: Blend::Sum,

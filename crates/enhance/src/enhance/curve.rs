@@ -295,6 +295,7 @@ mod tests {
             }
         }
         Scene {
+            weights: gsi_format::model::WeightRule::PerPixel,
             width: w,
             height: h,
             blend: Blend::Sum,

@@ -418,6 +418,7 @@ mod tests {
 
     fn scene(w: u32, h: u32, blend: Blend, g: Vec<([f32; 2], [f32; 3], [f32; 3])>) -> Scene {
         Scene {
+            weights: gsi_format::model::WeightRule::PerPixel,
             tone: None,
             width: w,
             height: h,

@@ -89,6 +89,7 @@ mod tests {
 
     fn scene(blend: Blend, cov: Vec<[f32; 3]>, colors: Vec<[f32; 3]>) -> Scene {
         Scene {
+            weights: gsi_format::model::WeightRule::PerPixel,
             width: 64,
             height: 32,
             blend,

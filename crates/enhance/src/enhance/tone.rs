@@ -65,6 +65,7 @@ mod tests {
 
     fn two(blend: Blend, colors: [[f32; 3]; 2]) -> Scene {
         Scene {
+            weights: gsi_format::model::WeightRule::PerPixel,
             tone: None,
             width: 16,
             height: 16,

@@ -54,7 +54,7 @@ pub use init::Init;
 pub use loss::Loss;
 
 use gsi_format::format::{self, Attribute, BitDepths, Records, WriteOptions};
-use gsi_format::model::{Blend, CovParam, GaussianSet, Scene};
+use gsi_format::model::{Blend, CovParam, GaussianSet, Scene, WeightRule};
 use gsi_optim::optim::{self, Adam};
 use gsi_render::render::{project_scene, Projected, RgbImage};
 use raster::Need;
@@ -428,6 +428,7 @@ impl<'a> Fitter<'a> {
             blend: self.blend,
             cov_param: CovParam::LogScaleRotation,
             gaussians: g,
+            weights: WeightRule::Columns,
         }
     }
 
@@ -1090,6 +1091,7 @@ pub fn encode(
             blend: opts.blend,
             cov_param: CovParam::LogScaleRotation,
             gaussians: params.clone(),
+            weights: WeightRule::Columns,
         };
         let per_g = coded_bytes_per_gaussian(&scene, bits) * 1.02;
         let fits = fitting_count(b, px, per_g);

@@ -164,6 +164,7 @@ fn smooth_scene(blend: Blend, seed: u64) -> Scene {
         g.opacity = Some((0..5).map(|_| rng.range(0.2, 0.55)).collect());
     }
     Scene {
+        weights: gsi_format::model::WeightRule::PerPixel,
         tone: None,
         width: w,
         height: h,
@@ -462,6 +463,7 @@ fn pruning_weighs_a_gaussian_against_the_fit_error() {
     let (w, h) = (64u32, 48u32);
     let (fw, fh) = (w as f32, h as f32);
     let scene = Scene {
+        weights: gsi_format::model::WeightRule::PerPixel,
         tone: None,
         width: w,
         height: h,

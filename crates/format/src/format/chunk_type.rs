@@ -17,6 +17,9 @@ impl ChunkType {
     pub const END: ChunkType = ChunkType(*b"GEND");
     /// The tone curve every blended value goes through (spec §6.6, version 1.2).
     pub const TONE_CURVE: ChunkType = ChunkType(*b"GTRC");
+    /// Weights by the column rule (spec §6.3.2, version 1.4): empty, its presence is the
+    /// message.
+    pub const COLUMN_WEIGHTS: ChunkType = ChunkType(*b"GCRW");
     /// Compression metadata.
     pub const COMPRESSION_META: ChunkType = ChunkType(*b"gCRM");
     /// Reserved: a fitted stage-2 enhancer.

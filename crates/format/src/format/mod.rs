@@ -49,6 +49,7 @@ pub mod tests_support {
     pub fn tiny_scene() -> Scene {
         Scene {
             tone: None,
+            weights: crate::model::WeightRule::PerPixel,
             width: 4,
             height: 3,
             blend: Blend::Sum,

@@ -6,6 +6,7 @@ use super::header::{Header, HEADER_LEN};
 use super::limits::{AllocBudget, Limits};
 use super::meta::CompressionMeta;
 use super::records::{Attribute, Records};
+use crate::model::WeightRule;
 use byteorder::{BigEndian, ByteOrder};
 use std::io::Read;
 
@@ -48,7 +49,7 @@ fn length_range(ty: ChunkType) -> Option<(u32, u32)> {
     use super::records::attribute_preamble_len as pre;
     Some(match ty {
         ChunkType::HEADER => (HEADER_LEN as u32, HEADER_LEN as u32),
-        ChunkType::END => (0, 0),
+        ChunkType::END | ChunkType::COLUMN_WEIGHTS => (0, 0),
         ChunkType::POSITIONS => (pre(2) as u32, u32::MAX),
         ChunkType::COVARIANCE | ChunkType::COLORS => (pre(3) as u32, u32::MAX),
         ChunkType::OPACITY => (pre(1) as u32, u32::MAX),
@@ -114,6 +115,7 @@ impl<R: Read> Decoder<R> {
         let header = self.read_header()?;
         let (mut pos, mut cov, mut col, mut opa, mut meta) = (None, None, None, None, None);
         let mut tone = None;
+        let mut columns = false;
         // Stage 2's chunks are kept unparsed (spec §2.3), but each may appear once.
         let (mut enhancer, mut original) = (false, false);
         let mut ancillary = Vec::new();
@@ -158,6 +160,10 @@ impl<R: Read> Decoder<R> {
                     once(tone.is_some())?;
                     tone = Some(super::trc::parse(&c.data).map_err(here)?);
                 }
+                ChunkType::COLUMN_WEIGHTS => {
+                    once(columns)?;
+                    columns = true;
+                }
                 ChunkType::COMPRESSION_META => {
                     once(meta.is_some())?;
                     meta = Some(CompressionMeta::parse(&c.data).map_err(here)?);
@@ -195,6 +201,11 @@ impl<R: Read> Decoder<R> {
             colors: col.ok_or_else(|| missing("GCOL"))?,
             opacity: opa,
             tone,
+            weights: if columns {
+                WeightRule::Columns
+            } else {
+                WeightRule::PerPixel
+            },
         };
         Ok(GsiFile {
             records,

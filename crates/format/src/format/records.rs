@@ -6,7 +6,7 @@ use super::error::{invalid, Error, ErrorKind, Result};
 use super::header::Header;
 use super::limits::{AllocBudget, Limits};
 use super::quant::{self, Quantizer};
-use crate::model::{CovParam, GaussianSet, Scene};
+use crate::model::{CovParam, GaussianSet, Scene, WeightRule};
 use byteorder::{BigEndian, ByteOrder};
 
 /// Payload compression method of an attribute chunk.
@@ -248,6 +248,8 @@ pub struct Records {
     pub opacity: Option<Attribute>,
     /// The `GTRC` chunk (spec §6.6): `None`, the blended values are shown as they are.
     pub tone: Option<crate::model::ToneCurve>,
+    /// [`WeightRule::Columns`] where the file has a `GCRW` chunk (spec §6.3.2).
+    pub weights: WeightRule,
 }
 
 /// Bits per component an encoder spends on each attribute.
@@ -317,6 +319,7 @@ impl Records {
             colors: Attribute::fit(&g.colors, [bits.color; 3]),
             opacity,
             tone: scene.tone.clone(),
+            weights: scene.weights,
         }
     }
 
@@ -338,6 +341,7 @@ impl Records {
                     .map(|a| a.values::<1>().into_iter().map(|[o]| o).collect()),
             },
             tone: self.tone.clone(),
+            weights: self.weights,
         }
     }
 

@@ -5,6 +5,7 @@ use super::error::{invalid, Result};
 use super::header::VERSION_MINOR_CODED;
 use super::meta::{CompressionMeta, MAX_SETTINGS_LEN};
 use super::records::{attribute_preamble_len, Records, METHOD_CODED};
+use crate::model::WeightRule;
 use std::io::Write;
 
 /// What goes into a file besides the records.
@@ -39,7 +40,7 @@ impl Default for WriteOptions {
 
 /// Write a complete file and return its size in bytes.
 ///
-/// Chunk order: signature, `GHDR`, `gCRM`, `GPOS`, `GCOV`, `GCOL`, `GOPA`, `GTRC`, the
+/// Chunk order: signature, `GHDR`, `gCRM`, `GCRW` (where the records weigh by columns), `GPOS`, `GCOV`, `GCOL`, `GOPA`, `GTRC`, the
 /// given ancillary chunks, `GEND`. Every payload is built first so that `gCRM` can state the
 /// exact size of the file it is part of.
 pub fn write_file<W: Write>(w: &mut W, records: &Records, opts: &WriteOptions) -> Result<u64> {
@@ -61,6 +62,11 @@ pub fn write_file<W: Write>(w: &mut W, records: &Records, opts: &WriteOptions) -
         (ChunkType::OPACITY, records.opacity.as_ref()),
     ];
     let mut body: Vec<(ChunkType, Vec<u8>)> = Vec::new();
+    // First after the header and `gCRM`, so that a streaming decoder knows the rule before
+    // any Gaussian.
+    if records.weights == WeightRule::Columns {
+        body.push((ChunkType::COLUMN_WEIGHTS, Vec::new()));
+    }
     let mut coded = false;
     for (ty, a) in attributes {
         if let Some(a) = a {

@@ -239,7 +239,7 @@ pub fn render_as<O: cpu::Output>(
     let tone = scene.tone.as_ref();
     cpu::render_projected::<O>(
         &projected,
-        scene.blend,
+        (scene.blend, scene.weights),
         tone,
         (width, height),
         out,

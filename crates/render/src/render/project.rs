@@ -5,9 +5,10 @@
 
 use super::TILE;
 use gsi_format::contract::{
-    ALPHA_MAX, ALPHA_MIN, COLOR_MAX, CORRELATION_MAX, EXTENT_SIGMAS, VAR_MAX, VAR_MIN,
+    exp, ALPHA_MAX, ALPHA_MIN, COLOR_MAX, COLUMN_BAND, COLUMN_DARK, COLUMN_START, COLUMN_STEEP,
+    CORRELATION_MAX, EXTENT_SIGMAS, VAR_MAX, VAR_MIN,
 };
-use gsi_format::model::{Blend, Scene};
+use gsi_format::model::{Blend, Scene, WeightRule};
 
 /// Inclusive range of pixel columns `x0..=x1` and rows `y0..=y1`; never empty.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -108,7 +109,51 @@ impl Projected {
         if power > 0.0 {
             return None;
         }
-        let mut alpha = self.opacity * gsi_format::contract::exp(power);
+        let mut alpha = self.opacity * exp(power);
+        if blend == Blend::Alpha {
+            alpha = alpha.min(ALPHA_MAX);
+        }
+        (alpha >= ALPHA_MIN).then_some(alpha)
+    }
+
+    /// The weight at pixel `(i, j)` under `rule`: [`Projected::alpha_at`] for
+    /// [`WeightRule::PerPixel`] and for a Gaussian steeper than [`COLUMN_STEEP`]; else
+    /// spec §6.3.2 in its plainest form, walking down column `i` from the first row of the
+    /// box in `j`'s band of [`COLUMN_BAND`] rows.
+    pub fn weight_at(&self, i: u32, j: u32, blend: Blend, rule: WeightRule) -> Option<f32> {
+        let [a, b, c] = self.conic;
+        if rule == WeightRule::PerPixel || c > COLUMN_STEEP {
+            return self.alpha_at(i, j, blend);
+        }
+        if !self.bbox.contains(i, j) {
+            return None;
+        }
+        let dx = offset(i, self.mean[0]);
+        let power = |row: u32| {
+            let dy = offset(row, self.mean[1]);
+            -0.5 * (a * dx * dx + c * dy * dy) - b * dx * dy
+        };
+        // The power's step from `row` to the next: its first difference, written out so
+        // that `A·dx·dx`, the same in both rows, does not round into it.
+        let step = |row: u32| {
+            let (dy0, dy1) = (offset(row, self.mean[1]), offset(row + 1, self.mean[1]));
+            -0.5 * (c * (dy0 + dy1)) - b * dx
+        };
+        let first = self.bbox.y0.max(j - j % COLUMN_BAND);
+        let k = exp(-c);
+        // Dark (w = 0) until the power reaches the start level, then carried while the
+        // weight stays at or above the dark level.
+        let (mut w, mut r) = (0f32, 0f32);
+        for row in first..=j {
+            if w >= COLUMN_DARK {
+                (w, r) = (w * r, r * k);
+            } else if power(row) >= COLUMN_START {
+                (w, r) = (exp(power(row)), exp(step(row)));
+            } else {
+                w = 0.0;
+            }
+        }
+        let mut alpha = self.opacity * w;
         if blend == Blend::Alpha {
             alpha = alpha.min(ALPHA_MAX);
         }
@@ -240,6 +285,7 @@ mod tests {
 
     fn one(pos: [f32; 2], cov: [f32; 3], opacity: Option<f32>) -> Scene {
         Scene {
+            weights: gsi_format::model::WeightRule::PerPixel,
             tone: None,
             width: 10,
             height: 10,
@@ -321,5 +367,45 @@ mod tests {
             assert!(o * cut.exp() < ALPHA_MIN, "{o}");
             assert!(o * (cut + 2e-3).exp() >= ALPHA_MIN, "{o}");
         }
+    }
+
+    /// Spec §6.3.2's worked example, and its band rule.
+    #[test]
+    fn column_rule_worked_example() {
+        let p = Projected {
+            index: 0,
+            mean: [1.25, 0.75],
+            conic: [0.5, 0.125, 0.25],
+            opacity: 1.0,
+            color: [1.0; 3],
+            bbox: PixelBox {
+                x0: 0,
+                y0: 0,
+                x1: 3,
+                y1: 40,
+            },
+            cut: cutoff_of(1.0),
+        };
+        let bits = |row, rule| p.weight_at(1, row, Blend::Sum, rule).map(f32::to_bits);
+        let columns = [0x3F7C07F5, 0x3F657A17, 0x3F22B938, 0x3EB3BA9B];
+        let per_pixel = [0x3F7C07F5, 0x3F657A17, 0x3F22B937, 0x3EB3BA9A];
+        for row in 0..4 {
+            assert_eq!(bits(row, WeightRule::Columns), Some(columns[row as usize]));
+            assert_eq!(
+                bits(row, WeightRule::PerPixel),
+                Some(per_pixel[row as usize])
+            );
+        }
+        assert_eq!(exp(-0.25).to_bits(), 0x3F475F7D);
+        assert_eq!(exp(-0.09375).to_bits(), 0x3F691735);
+        // A band's first row is E(power) itself, the next two products of it, whatever
+        // the rows above: the centre moved down by 16 rows.
+        let q = Projected {
+            mean: [1.25, 16.75],
+            ..p
+        };
+        let at = |row| q.weight_at(1, row, Blend::Sum, WeightRule::Columns);
+        assert_eq!(at(16).map(f32::to_bits), Some(columns[0]));
+        assert_eq!(at(17).map(f32::to_bits), Some(columns[1]));
     }
 }

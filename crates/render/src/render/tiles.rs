@@ -58,11 +58,14 @@ pub fn bin<I, S>(
 }
 
 /// The largest `Q = -2·power` (exactly) at which a pixel may still reach the cut-off
-/// `cut`, where `s` bounds the magnitude of `Q`'s terms: a pixel's binary32 `power` is
-/// off by less than 1e-6·s, so a margin of 1e-5·s + 1e-3 leaves out no pixel that
-/// reaches the cut.
+/// `cut`, where `s` bounds the magnitude of `Q`'s terms. A pixel's binary32 `power` is
+/// off by less than 1e-6·s; a weight of the column rule (spec §6.3.2) is off from
+/// `e^power` by less than 31 such errors in its logarithm (its first power, and 15 times
+/// a step, whose terms are bounded as the power's) and 2e-5 (the rounding of up to 30
+/// products and of `E(−C)` raised to up to the 105th power). So a margin of 1e-4·s + 1e-3 in `Q` leaves out no
+/// pixel that reaches the cut by either rule.
 fn reach(cut: f32, s: f64) -> f64 {
-    -2.0 * f64::from(cut) + 1e-3 + 1e-5 * s
+    -2.0 * f64::from(cut) + 1e-3 + 1e-4 * s
 }
 
 /// The tiles `(lo, hi)` (inclusive tile columns) of a band of pixel rows `rows` where `g`
@@ -426,6 +429,7 @@ mod tests {
             g.colors.push([t, 1.0 - t, 0.5]);
         }
         let scene = Scene {
+            weights: gsi_format::model::WeightRule::PerPixel,
             tone: None,
             width: w,
             height: h,
