@@ -7,11 +7,12 @@
 //! * [`project`]: per-Gaussian preprocessing into pixel space ([`Projected`]). It is the
 //!   only place where a covariance becomes a conic and a pixel box, so other renderers
 //!   reuse it rather than re-deriving the clamps.
-//! * [`Projected::alpha_at`]: the per-pixel rule, written once, readably.
+//! * [`Projected::alpha_at`]: the per-pixel rule, written once, readably, and
+//!   [`Projected::weight_at`]: the column rule of files with `GCRW` (§6.3.2), as plainly.
 //! * `tiles`, `cpu` and `lanes`: the CPU renderer. Tiles only decide *which* Gaussians a
 //!   pixel visits (those whose pixel box holds it), never in what order, and `lanes`
 //!   evaluates eight pixels at once with the same binary32 operations, so the tiled result
-//!   is bit-identical to a naive loop over all Gaussians for every pixel.
+//!   is bit-identical to a naive loop over all Gaussians for every pixel, by either rule.
 //!
 //! Without a tone curve the output is linear in the stored (sRGB-encoded) colour values
 //! and is not clamped: `sum` blending may overshoot `[0, 1]`, and a caller that
