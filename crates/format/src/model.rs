@@ -150,7 +150,7 @@ pub enum WeightRule {
     PerPixel,
     /// Down each pixel column by two products a row from an `E` at the first row of each
     /// band of 16 rows (§6.3.2): files with a `GCRW` chunk, which every encoder of version
-    /// 1.4 writes. A CPU decoder needs about half the arithmetic per pixel.
+    /// 1.4 writes: two products a pixel where §6.3 takes the power and `E`.
     Columns,
 }
 

@@ -88,8 +88,8 @@ impl Output for RgbF32Bytes {
 }
 
 /// Render projected Gaussians (in stored order) into `out`, `width * height` pixels of
-/// `O`'s layout, weighed by `rule` and blended by `blend`, every blended value through
-/// `tone` where there is one (spec §6.6).
+/// `O`'s layout, weighed and blended as `blend` (the blend mode, the weight rule) says,
+/// every blended value through `tone` where there is one (spec §6.6).
 pub fn render_projected<O: Output>(
     proj: &[Projected],
     blend: (Blend, WeightRule),

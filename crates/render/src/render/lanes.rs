@@ -26,8 +26,7 @@
 //! 15.8 ms against 20.7 ms by §6.3. Tiles are 16 rows, the rule's bands, so no weight is
 //! carried from one tile to the next. (The blending is a trait with inlined methods, not
 //! a closure: a closure with two callers is compiled apart from the `#[target_feature]`
-//! function, without AVX, and the loop called it for every chunk-row at a third of the
-//! speed.)
+//! function, without AVX, and the loop called it for every chunk-row at half the speed.)
 //!
 //! The encoder's loops (`gsi_fit::fit`) share [`Footprint`] and the polynomial; they
 //! may fuse multiply-adds (`F`), since a fit needs the decoder's values, not its bits.
@@ -145,9 +144,7 @@ impl Footprint<'_> {
     ) -> V {
         let g = self.g;
         let cut = g.cutoff();
-        // The box's columns relative to the chunk's first (negative where it starts before).
-        let at = start as i32;
-        let (lx0, lx1) = (self.lx0 as i32 - at, self.lx1 as i32 - at);
+        let (lx0, lx1) = self.box_lanes(start);
         let mut alpha = [0f32; LANES];
         for l in 0..LANES {
             let power = power[l];
@@ -345,9 +342,8 @@ fn chunk_rows<const JOIN: bool, const CAP: bool, const COLUMNS: bool>(
     // The column rule: `w` the weight, `r` its ratio to the next row's, `k` the ratio of
     // successive `r` (the power is a parabola down a column, its second difference −C).
     let k = exp(-g.conic[2]);
-    let inside = f.inside_lanes();
     for start in f.starts() {
-        let mask = inside(start);
+        let mask = f.inside_lanes(start);
         // Every lane starts dark (w = 0). A lane outside the box's columns, no pixel of
         // the rule, counts as carried, so that it never asks for a power or an `E`: it
         // carries its 0, and its factor of 0 keeps it out of every alpha.
@@ -403,18 +399,22 @@ fn chunk_rows<const JOIN: bool, const CAP: bool, const COLUMNS: bool>(
 }
 
 impl Footprint<'_> {
+    /// The box's columns `lx0..lx1` relative to the first of the chunk from tile-local
+    /// column `start` (negative where the box starts before it): lane `l` lies in the
+    /// box where `lx0 <= l < lx1`.
+    #[inline(always)]
+    fn box_lanes(&self, start: usize) -> (i32, i32) {
+        let at = start as i32;
+        (self.lx0 as i32 - at, self.lx1 as i32 - at)
+    }
+
     /// 1 in the lanes of the chunk from tile-local column `start` that lie in the box's
     /// columns, 0 in the others: a factor of the alpha, so that its one test also turns
     /// away the lanes outside the box.
     #[inline(always)]
-    fn inside_lanes(&self) -> impl Fn(usize) -> V + '_ {
-        move |start| {
-            let (lx0, lx1) = (
-                self.lx0 as i32 - start as i32,
-                self.lx1 as i32 - start as i32,
-            );
-            std::array::from_fn(|l| f32::from(u8::from((l as i32 >= lx0) & ((l as i32) < lx1))))
-        }
+    fn inside_lanes(&self, start: usize) -> V {
+        let (lx0, lx1) = self.box_lanes(start);
+        std::array::from_fn(|l| f32::from(u8::from((l as i32 >= lx0) & ((l as i32) < lx1))))
     }
 
     /// The column rule's start at a row whose centre is `dy` from the Gaussian's and

@@ -102,14 +102,26 @@ impl Projected {
         if !self.bbox.contains(i, j) {
             return None;
         }
-        let [a, b, c] = self.conic;
-        let dx = (i as f32 + 0.5) - self.mean[0];
-        let dy = (j as f32 + 0.5) - self.mean[1];
-        let power = -0.5 * (a * dx * dx + c * dy * dy) - b * dx * dy;
+        let power = self.power(offset(i, self.mean[0]), offset(j, self.mean[1]));
         if power > 0.0 {
             return None;
         }
-        let mut alpha = self.opacity * exp(power);
+        self.alpha_of(exp(power), blend)
+    }
+
+    /// `power = −0.5·(A·dx·dx + C·dy·dy) − B·dx·dy` at offsets `(dx, dy)` from the centre
+    /// (spec §6.3).
+    #[inline]
+    fn power(&self, dx: f32, dy: f32) -> f32 {
+        let [a, b, c] = self.conic;
+        -0.5 * (a * dx * dx + c * dy * dy) - b * dx * dy
+    }
+
+    /// The alpha of a weight `w` (`E(power)` or the column rule's): `o·w`, capped at
+    /// `ALPHA_MAX` in `alpha` blending, `None` below `ALPHA_MIN`.
+    #[inline]
+    fn alpha_of(&self, w: f32, blend: Blend) -> Option<f32> {
+        let mut alpha = self.opacity * w;
         if blend == Blend::Alpha {
             alpha = alpha.min(ALPHA_MAX);
         }
@@ -121,7 +133,7 @@ impl Projected {
     /// spec §6.3.2 in its plainest form, walking down column `i` from the first row of the
     /// box in `j`'s band of [`COLUMN_BAND`] rows.
     pub fn weight_at(&self, i: u32, j: u32, blend: Blend, rule: WeightRule) -> Option<f32> {
-        let [a, b, c] = self.conic;
+        let [_, b, c] = self.conic;
         if rule == WeightRule::PerPixel || c > COLUMN_STEEP {
             return self.alpha_at(i, j, blend);
         }
@@ -129,10 +141,7 @@ impl Projected {
             return None;
         }
         let dx = offset(i, self.mean[0]);
-        let power = |row: u32| {
-            let dy = offset(row, self.mean[1]);
-            -0.5 * (a * dx * dx + c * dy * dy) - b * dx * dy
-        };
+        let power = |row: u32| self.power(dx, offset(row, self.mean[1]));
         // The power's step from `row` to the next: its first difference, written out so
         // that `A·dx·dx`, the same in both rows, does not round into it.
         let step = |row: u32| {
@@ -153,11 +162,7 @@ impl Projected {
                 w = 0.0;
             }
         }
-        let mut alpha = self.opacity * w;
-        if blend == Blend::Alpha {
-            alpha = alpha.min(ALPHA_MAX);
-        }
-        (alpha >= ALPHA_MIN).then_some(alpha)
+        self.alpha_of(w, blend)
     }
 }
 
