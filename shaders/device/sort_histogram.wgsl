@@ -13,7 +13,7 @@
 @group(0) @binding(2) var<storage, read> keys: array<u32>;
 @group(0) @binding(3) var<storage, read_write> hist: array<u32>;
 
-var<workgroup> bins: array<atomic<u32>, 256>;
+var<workgroup> bins: array<atomic<u32>, SORT_MAX_BINS>;
 
 @compute @workgroup_size(256, 1, 1)
 fn main(
@@ -25,15 +25,20 @@ fn main(
     if (block >= params.blocks) {
         return;
     }
-    atomicStore(&bins[lid], 0u);
+    let nbins = sort_bins();
+    for (var d = lid; d < nbins; d = d + SORT_WG) {
+        atomicStore(&bins[d], 0u);
+    }
     workgroupBarrier();
     let n = min(count[0], params.capacity);
     for (var r = 0u; r < SORT_ROUNDS; r = r + 1u) {
         let i = block * SORT_BLOCK + r * SORT_WG + lid;
         if (i < n) {
-            atomicAdd(&bins[(keys[i] >> params.shift) & 255u], 1u);
+            atomicAdd(&bins[digit_of(keys[i])], 1u);
         }
     }
     workgroupBarrier();
-    hist[lid * params.blocks + block] = atomicLoad(&bins[lid]);
+    for (var d = lid; d < nbins; d = d + SORT_WG) {
+        hist[d * params.blocks + block] = atomicLoad(&bins[d]);
+    }
 }

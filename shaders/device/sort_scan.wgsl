@@ -1,7 +1,7 @@
 // Radix sort, step 2 of 3 per pass: the digit-major histogram, in place, becomes
 // exclusive prefix sums, i.e. the first output slot of each (digit, block).
 //
-// The histogram read as one flat array (256 rows of `blocks` counts, digit-major) is
+// The histogram read as one flat array (one row of `blocks` counts per digit) is
 // scanned in two entry points, so that the work spreads over one workgroup per chunk
 // of SORT_WG * SCAN_PER counts rather than one workgroup for all:
 // - `chunks`: each workgroup sums its chunk into `chunk_sums`;
@@ -20,7 +20,7 @@
 var<workgroup> sums: array<u32, 256>;
 
 fn hist_len() -> u32 {
-    return 256u * params.blocks;
+    return sort_bins() * params.blocks;
 }
 
 fn chunk_count() -> u32 {

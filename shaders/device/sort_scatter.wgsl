@@ -3,12 +3,12 @@
 // digits in input order (a stable pass, so LSD passes compose into a stable sort).
 //
 // The rank must not depend on scheduling, so it is never taken from an atomic counter.
-// The block is walked in SORT_ROUNDS rounds of 256 items, one per invocation. In a round
-// each item sets its bit (its local index) in a 256-bit mask of its digit; a bitwise OR
-// gives the same mask whatever order the ORs land in. An item's rank is then the
-// population count of its digit's mask below its own bit, plus `next[digit]`, the slot
-// after the previous rounds' items of that digit. Cost: at most 8 popcounts per item and
-// 8 KiB of workgroup memory for the masks.
+// The workgroup sorts its block's words `digit << SORT_INDEX_BITS | position` with a
+// bitonic network (the positions are distinct, so the words are, and the order of the
+// sorted block is fixed: by digit, then by position). An item's rank is then its place
+// in the sorted block minus the place of the first item with its digit. Cost: 55
+// compare-exchange steps of the workgroup, 12 KiB of workgroup memory, and no memory per
+// digit beyond one slot, so digits can be 11 bits wide.
 
 @group(0) @binding(0) var<uniform> params: SortParams;
 @group(0) @binding(1) var<storage, read> count: array<u32>;
@@ -19,10 +19,12 @@
 @group(0) @binding(5) var<storage, read_write> keys_out: array<u32>;
 @group(0) @binding(6) var<storage, read_write> values_out: array<u32>;
 
-// Output slot of this block's next item of each digit.
-var<workgroup> next: array<u32, 256>;
-// Bit (j % 32) of masks[d * 8 + j / 32] is set when item j of the round has digit d.
-var<workgroup> masks: array<atomic<u32>, 2048>;
+// The word of a position past the live count: above every live word, so it sorts last.
+const DEAD: u32 = 0xffffffffu;
+
+var<workgroup> order: array<u32, SORT_BLOCK>;
+// Place in `order` of the first item of each digit.
+var<workgroup> first: array<u32, SORT_MAX_BINS>;
 
 @compute @workgroup_size(256, 1, 1)
 fn main(
@@ -34,44 +36,50 @@ fn main(
     if (block >= params.blocks) {
         return;
     }
-    // Invocation lid looks after digit lid's slot and mask words between rounds.
-    next[lid] = offsets[lid * params.blocks + block];
-    for (var w = 0u; w < 8u; w = w + 1u) {
-        atomicStore(&masks[lid * 8u + w], 0u);
-    }
     let n = min(count[0], params.capacity);
-    let word = lid / 32u;
-    let bit = 1u << (lid % 32u);
-    workgroupBarrier();
-    for (var r = 0u; r < SORT_ROUNDS; r = r + 1u) {
-        let i = block * SORT_BLOCK + r * SORT_WG + lid;
-        let live = i < n;
-        var key = 0u;
-        var digit = 0u;
-        if (live) {
-            key = keys_in[i];
-            digit = (key >> params.shift) & 255u;
-            atomicOr(&masks[digit * 8u + word], bit);
+    let base = block * SORT_BLOCK;
+    for (var s = lid; s < SORT_BLOCK; s = s + SORT_WG) {
+        var word = DEAD;
+        if (base + s < n) {
+            word = (digit_of(keys_in[base + s]) << SORT_INDEX_BITS) | s;
         }
-        workgroupBarrier();
-        if (live) {
-            let m = digit * 8u;
-            var rank = countOneBits(atomicLoad(&masks[m + word]) & (bit - 1u));
-            for (var w = 0u; w < word; w = w + 1u) {
-                rank = rank + countOneBits(atomicLoad(&masks[m + w]));
+        order[s] = word;
+    }
+    // Bitonic sort, ascending: stage (k, j) compares each place a whose bit j is clear
+    // with a + j, in the direction that bit k of a gives.
+    for (var k = 2u; k <= SORT_BLOCK; k = k << 1u) {
+        for (var j = k >> 1u; j > 0u; j = j >> 1u) {
+            workgroupBarrier();
+            for (var q = lid; q < SORT_BLOCK / 2u; q = q + SORT_WG) {
+                let a = ((q & ~(j - 1u)) << 1u) | (q & (j - 1u));
+                let x = order[a];
+                let y = order[a + j];
+                if ((x > y) == ((a & k) == 0u)) {
+                    order[a] = y;
+                    order[a + j] = x;
+                }
             }
-            let dst = next[digit] + rank;
-            keys_out[dst] = key;
-            values_out[dst] = values_in[i];
         }
-        workgroupBarrier();
-        // Advance digit lid past this round's items and clear its mask.
-        var seen = 0u;
-        for (var w = 0u; w < 8u; w = w + 1u) {
-            seen = seen + countOneBits(atomicLoad(&masks[lid * 8u + w]));
-            atomicStore(&masks[lid * 8u + w], 0u);
+    }
+    workgroupBarrier();
+    for (var s = lid; s < SORT_BLOCK; s = s + SORT_WG) {
+        let word = order[s];
+        if (word != DEAD) {
+            let d = word >> SORT_INDEX_BITS;
+            if (s == 0u || (order[s - 1u] >> SORT_INDEX_BITS) != d) {
+                first[d] = s;
+            }
         }
-        next[lid] = next[lid] + seen;
-        workgroupBarrier();
+    }
+    workgroupBarrier();
+    for (var s = lid; s < SORT_BLOCK; s = s + SORT_WG) {
+        let word = order[s];
+        if (word != DEAD) {
+            let d = word >> SORT_INDEX_BITS;
+            let src = base + (word & (SORT_BLOCK - 1u));
+            let dst = offsets[d * params.blocks + block] + s - first[d];
+            keys_out[dst] = keys_in[src];
+            values_out[dst] = values_in[src];
+        }
     }
 }

@@ -335,6 +335,7 @@ impl ForwardLists {
         let tiles = f.tiles.0 * f.tiles.1;
         let key_bits = (32 - tiles.saturating_sub(1).leading_zeros()).max(1);
         let plan = SortPlan::new(gpu, &k.sort, &keys, &values, &f.entries, capacity, key_bits)?;
+        let (sorted_keys, sorted_values) = plan.sorted();
         Ok(ForwardLists {
             capacity,
             emit: k
@@ -342,7 +343,7 @@ impl ForwardLists {
                 .bind(device, &[&f.fit, &f.boxes, &f.first_entry, &keys, &values]),
             tiles: k
                 .tiles
-                .bind(device, &[&f.fit, &keys, &f.entries, &f.offsets]),
+                .bind(device, &[&f.fit, sorted_keys, &f.entries, &f.offsets]),
             render: gpu.render.bind(
                 device,
                 &[
@@ -350,11 +351,11 @@ impl ForwardLists {
                     &f.gaussians,
                     &f.boxes,
                     &f.offsets,
-                    &values,
+                    sorted_values,
                     &f.image,
                 ],
             ),
-            values,
+            values: sorted_values.clone(),
             plan,
         })
     }

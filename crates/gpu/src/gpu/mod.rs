@@ -81,6 +81,8 @@ fn contract() -> String {
         ("STRIDE", forward::STRIDE as u32),
         ("SLOT", SLOT as u32),
         ("SORT_BLOCK", sort::BLOCK),
+        ("SORT_INDEX_BITS", sort::BLOCK.trailing_zeros()),
+        ("SORT_MAX_BINS", 1 << sort::MAX_DIGIT_BITS),
     ] {
         out += &format!("const {name}: u32 = {value}u;\n");
     }

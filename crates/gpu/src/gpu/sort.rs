@@ -2,10 +2,12 @@
 //! Gaussians into tiles on the GPU: pairs are emitted in Gaussian order and keyed by tile,
 //! and stability keeps each tile's Gaussians in stored order, as the CPU's binning does.
 //!
-//! LSD radix sort with 8-bit digits, `ceil(key_bits / 8)` passes, each of three kernels
-//! (`shaders/sort_*.wgsl`): per-block digit counts, one exclusive scan of them, and a
-//! scatter that ranks equal digits by position, never by atomic counters, so the output
-//! is the same on every run and every adapter. The live length is a `u32` on the GPU
+//! LSD radix sort with digits of up to 11 bits, `ceil(key_bits / 11)` passes, each of
+//! three kernels (`shaders/sort_*.wgsl`): per-block digit counts, one exclusive scan of
+//! them, and a scatter that ranks equal digits by position (a bitonic sort of the block),
+//! never by atomic counters, so the output is the same on every run and every adapter.
+//! Wide digits because passes, not items, are what a frame's sort costs: a 768×512
+//! frame's 1536 tile keys take one pass of 11 bits instead of two of 8. The live length is a `u32` on the GPU
 //! (written by an earlier kernel), which the host never reads: every kernel is dispatched
 //! for the buffers' capacity and ignores the items past the count.
 
@@ -19,9 +21,20 @@ pub const SCAN_PER: u32 = 16;
 
 /// Items per block, one workgroup's share (`SORT_BLOCK` of the shaders' prelude).
 pub const BLOCK: u32 = 1024;
-/// Bits per digit; `2^DIGIT_BITS` bins (the workgroup size of every sort kernel).
-const DIGIT_BITS: u32 = 8;
-const BINS: u64 = 1 << DIGIT_BITS;
+/// Invocations per workgroup of every sort kernel (`SORT_WG` of the shaders).
+const WORKGROUP: u64 = 256;
+
+/// Bits of the widest digit: its `2^11` bins fill 8 KiB of workgroup memory in the
+/// histogram and the scatter.
+pub const MAX_DIGIT_BITS: u32 = 11;
+
+/// The passes for keys below `2^key_bits`, and the bits of each pass's digit: as few
+/// passes as digits of [`MAX_DIGIT_BITS`] allow, the bits spread evenly over them (the
+/// fewer bins, the less each block's histogram holds).
+fn digits(key_bits: u32) -> (u32, u32) {
+    let passes = key_bits.div_ceil(MAX_DIGIT_BITS);
+    (passes, key_bits.div_ceil(passes.max(1)))
+}
 
 /// The pipelines, built once per device.
 pub struct RadixSort {
@@ -70,18 +83,19 @@ struct Pass {
 /// Scratch buffers and bind groups for sorting `keys`/`values` (each `capacity` u32s,
 /// `STORAGE | COPY_SRC | COPY_DST`) whose live length is `min(count[0], capacity)`.
 ///
-/// After [`SortPlan::record`] the first `min(count[0], capacity)` entries of `keys` and
-/// `values` are the pairs sorted by key, equal keys in input order; the entries past them
-/// are unspecified.
+/// After [`SortPlan::record`] the first `min(count[0], capacity)` entries of the buffers
+/// that [`SortPlan::sorted`] names are the pairs sorted by key, equal keys in input order;
+/// the entries past them, and the other buffers, are unspecified.
 pub struct SortPlan {
     passes: Vec<Pass>,
     /// Workgroups per dispatch of the per-block kernels, a 2D grid covering every block.
     groups: (u32, u32),
     /// Workgroups of the scan's per-chunk kernels.
     scan_groups: (u32, u32),
-    /// With an odd pass count the result ends in the scratch buffers: `(scratch keys,
-    /// scratch values, caller's keys, caller's values, bytes)` to copy back.
-    copy_back: Option<(wgpu::Buffer, wgpu::Buffer, wgpu::Buffer, wgpu::Buffer, u64)>,
+    /// Where the last pass writes: the caller's keys and values after an even pass count,
+    /// the plan's scratch after an odd one (read there rather than copied back: a copy
+    /// costs a frame as much as a dispatch).
+    sorted: (wgpu::Buffer, wgpu::Buffer),
 }
 
 impl SortPlan {
@@ -106,11 +120,12 @@ impl SortPlan {
             ));
         }
         let bytes = u64::from(capacity) * 4;
-        let passes = key_bits.div_ceil(DIGIT_BITS);
+        let (passes, digit_bits) = digits(key_bits);
+        let bins = 1u64 << digit_bits;
         let device = &gpu.device;
         let max_binding = gpu.max_binding;
         let blocks = capacity.div_ceil(BLOCK);
-        let hist_bytes = BINS * u64::from(blocks) * 4;
+        let hist_bytes = bins * u64::from(blocks) * 4;
         let max_groups = gpu.max_groups.max(1);
         let gx = blocks.clamp(1, max_groups);
         let groups = (gx, blocks.div_ceil(gx));
@@ -132,7 +147,7 @@ impl SortPlan {
                 passes: Vec::new(),
                 groups: (0, 0),
                 scan_groups: (0, 0),
-                copy_back: None,
+                sorted: (keys.clone(), values.clone()),
             });
         }
         let storage = |size: u64| {
@@ -148,7 +163,7 @@ impl SortPlan {
         let (scratch_keys, scratch_values, hist) =
             (storage(bytes), storage(bytes), storage(hist_bytes));
         // The scan's chunks of the histogram, one workgroup each.
-        let chunks = (BINS * u64::from(blocks)).div_ceil(BINS * u64::from(SCAN_PER)) as u32;
+        let chunks = (bins * u64::from(blocks)).div_ceil(WORKGROUP * u64::from(SCAN_PER)) as u32;
         let chunk_sums = storage(u64::from(chunks.max(1)) * 4);
         let cx = chunks.clamp(1, max_groups);
         let scan_groups = (cx, chunks.div_ceil(cx).max(1));
@@ -157,7 +172,7 @@ impl SortPlan {
         let (mut from, mut to) = ((keys, values), (&scratch_keys, &scratch_values));
         let passes = (0..passes)
             .map(|p| {
-                let params = [p * DIGIT_BITS, blocks, capacity, 0u32];
+                let params = [p * digit_bits, blocks, capacity, digit_bits];
                 let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                     label: Some("sort params"),
                     contents: bytemuck::cast_slice(&params),
@@ -176,45 +191,35 @@ impl SortPlan {
                 pass
             })
             .collect::<Vec<_>>();
-        let copy_back = (passes.len() % 2 == 1).then(|| {
-            (
-                scratch_keys,
-                scratch_values,
-                keys.clone(),
-                values.clone(),
-                bytes,
-            )
-        });
         Ok(SortPlan {
             passes,
             groups,
             scan_groups,
-            copy_back,
+            sorted: (from.0.clone(), from.1.clone()),
         })
     }
 
+    /// The keys and values buffers that hold the sorted pairs after [`SortPlan::record`].
+    pub fn sorted(&self) -> (&wgpu::Buffer, &wgpu::Buffer) {
+        (&self.sorted.0, &self.sorted.1)
+    }
+
     /// Record the whole sort into `encoder`: one compute pass (wgpu orders the dispatches
-    /// that write and then read a buffer), then the copy back when the pass count is odd.
+    /// that write and then read a buffer).
     pub fn record(&self, sort: &RadixSort, encoder: &mut wgpu::CommandEncoder) {
         if self.passes.is_empty() {
             return;
         }
-        {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("radix sort"),
-                timestamp_writes: None,
-            });
-            for p in &self.passes {
-                sort.histogram
-                    .dispatch(&mut pass, &p.histogram, self.groups);
-                sort.scan[0].dispatch(&mut pass, &p.scan, self.scan_groups);
-                sort.scan[1].dispatch(&mut pass, &p.scan, self.scan_groups);
-                sort.scatter.dispatch(&mut pass, &p.scatter, self.groups);
-            }
-        }
-        if let Some((sk, sv, k, v, bytes)) = &self.copy_back {
-            encoder.copy_buffer_to_buffer(sk, 0, k, 0, *bytes);
-            encoder.copy_buffer_to_buffer(sv, 0, v, 0, *bytes);
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("radix sort"),
+            timestamp_writes: None,
+        });
+        for p in &self.passes {
+            sort.histogram
+                .dispatch(&mut pass, &p.histogram, self.groups);
+            sort.scan[0].dispatch(&mut pass, &p.scan, self.scan_groups);
+            sort.scan[1].dispatch(&mut pass, &p.scan, self.scan_groups);
+            sort.scatter.dispatch(&mut pass, &p.scatter, self.groups);
         }
     }
 }
@@ -225,6 +230,11 @@ mod tests {
     use gsi_optim::rng::SplitMix64;
 
     use super::super::tests::gpu;
+
+    /// The pipelines, failing the test on any shader or pipeline error.
+    fn kernels(gpu: &super::super::Gpu) -> RadixSort {
+        gpu.checked(|| Ok(RadixSort::new(&gpu.device))).unwrap()
+    }
 
     fn buffer(gpu: &super::super::Gpu, data: &[u32]) -> wgpu::Buffer {
         gpu.storage(bytemuck::cast_slice(data))
@@ -253,9 +263,10 @@ mod tests {
         let live = count.min(capacity) as usize;
         let mut want: Vec<(u32, u32)> = keys[..live].iter().copied().zip(values).collect();
         want.sort_by_key(|&(k, _)| k);
-        let got: Vec<(u32, u32)> = read(gpu, &kb, live)
+        let (sk, sv) = plan.sorted();
+        let got: Vec<(u32, u32)> = read(gpu, sk, live)
             .into_iter()
-            .zip(read(gpu, &vb, live))
+            .zip(read(gpu, sv, live))
             .collect();
         if let Some(i) = (0..live).find(|&i| got[i] != want[i]) {
             panic!(
@@ -284,9 +295,10 @@ mod tests {
     #[test]
     fn matches_a_stable_cpu_sort() {
         let Some(gpu) = gpu() else { return };
-        let sort = RadixSort::new(&gpu.device);
+        let sort = kernels(&gpu);
         let mut rng = SplitMix64::new(7);
-        for bits in [8, 11, 16, 24, 32] {
+        // One pass of 1, 5, 8 and 11 bits, two of 6, 8 and 11, three of 8 and of 11.
+        for bits in [1, 5, 8, 11, 12, 16, 22, 24, 32] {
             for n in [0, 1, 255, 1024, 1025, 100_000] {
                 let keys = random_keys(&mut rng, n, bits);
                 check(&gpu, &sort, &keys, n as u32, bits);
@@ -295,9 +307,20 @@ mod tests {
     }
 
     #[test]
+    fn digits_are_as_few_and_as_even_as_the_width_allows() {
+        assert_eq!(digits(0), (0, 0));
+        assert_eq!(digits(1), (1, 1));
+        assert_eq!(digits(11), (1, 11));
+        assert_eq!(digits(12), (2, 6));
+        assert_eq!(digits(16), (2, 8));
+        assert_eq!(digits(23), (3, 8));
+        assert_eq!(digits(32), (3, 11));
+    }
+
+    #[test]
     fn ignores_pairs_past_the_count() {
         let Some(gpu) = gpu() else { return };
-        let sort = RadixSort::new(&gpu.device);
+        let sort = kernels(&gpu);
         let mut rng = SplitMix64::new(11);
         for (n, count, bits) in [
             (5000, 3001, 16),
@@ -316,7 +339,7 @@ mod tests {
     #[test]
     fn sorted_and_reversed_input() {
         let Some(gpu) = gpu() else { return };
-        let sort = RadixSort::new(&gpu.device);
+        let sort = kernels(&gpu);
         let n = 10_000u32;
         let sorted: Vec<u32> = (0..n).map(|i| i / 3).collect();
         let reversed: Vec<u32> = sorted.iter().rev().copied().collect();
@@ -331,7 +354,7 @@ mod tests {
     #[test]
     fn refuses_what_it_cannot_sort() {
         let Some(gpu) = gpu() else { return };
-        let sort = RadixSort::new(&gpu.device);
+        let sort = kernels(&gpu);
         let (k, v, c) = (
             buffer(&gpu, &[0; 16]),
             buffer(&gpu, &[0; 16]),
