@@ -6,7 +6,8 @@
 //!
 //! 1. Draw rate: Kodak images of 768×512 fitted on the GPU with 10k and 70k Gaussians,
 //!    then drawn resident ([`gsi::gpu::GpuScene`]: projection, binning and render on the
-//!    GPU per frame, nothing read back), frames per second over a few hundred frames,
+//!    GPU per frame, nothing read back), frames per second: the median of seven runs of
+//!    500 frames (one run of 0.1 s moved by a third between runs on a shared machine),
 //!    with the submitting thread's CPU time per frame and the rate of the scene's first
 //!    64 Gaussians alone (the floor a frame has whatever it draws: submission and a
 //!    chain of dependent dispatches); beside it, `Gpu::render` per call (CPU projection,
@@ -66,7 +67,7 @@ fn main() {
         .find(|t| (t.width, t.height) == (768, 512))
         .expect("a 768×512 image");
     let sizes: &[usize] = if quick { &[2_000] } else { &[10_000, 70_000] };
-    let frames = if quick { 5 } else { 500 };
+    let (frames, runs) = if quick { (5, 1) } else { (500, 7) };
     let mut draw = Vec::new();
     for &n in sizes {
         let opts = EncodeOptions {
@@ -79,13 +80,13 @@ fn main() {
         let resident = GpuScene::new(&gpu, &scene, 768, 512).expect("upload");
         resident.draw(frames / 10 + 1).expect("GPU");
         resident.wait().expect("GPU");
-        let (fps, submit_us) = draw_rate(&resident, frames);
+        let (fps, submit_us, spread) = draw_rate(&resident, frames, runs);
         // The same frames with the first 64 Gaussians alone: what a frame costs whatever
         // the scene (submission, a dozen dispatches and their barriers).
         let floor = GpuScene::new(&gpu, &first(&scene, 64), 768, 512).expect("upload");
         floor.draw(frames / 10 + 1).expect("GPU");
         floor.wait().expect("GPU");
-        let (floor_fps, _) = draw_rate(&floor, frames);
+        let (floor_fps, _, _) = draw_rate(&floor, frames, runs);
         let calls = if quick { 2 } else { 50 };
         let t = Instant::now();
         for _ in 0..calls {
@@ -93,18 +94,22 @@ fn main() {
         }
         let per_call = t.elapsed().as_secs_f64() / f64::from(calls);
         println!(
-            "{} Gaussians at 768x512: {fps:.0} frames/s resident ({submit_us:.0} us of CPU to submit a frame; 64 Gaussians: {floor_fps:.0} frames/s); Gpu::render {:.2} ms per call ({:.1} dB file)",
+            "{} Gaussians at 768x512: {fps:.0} frames/s resident (runs {:.0}-{:.0}; {submit_us:.0} us of CPU to submit a frame; 64 Gaussians: {floor_fps:.0} frames/s); Gpu::render {:.2} ms per call ({:.1} dB file)",
             scene.gaussians.len(),
+            spread.0,
+            spread.1,
             per_call * 1e3,
             encoded.psnr
         );
         draw.push(json!({
             "gaussians": scene.gaussians.len(),
             "resident_fps": fps,
+            "resident_fps_runs_min_max": [spread.0, spread.1],
             "submit_cpu_us_per_frame": submit_us,
             "fps_first_64_gaussians": floor_fps,
             "render_call_ms": per_call * 1e3,
             "frames": frames,
+            "runs": runs,
         }));
     }
 
@@ -194,16 +199,30 @@ fn commit() -> String {
         .unwrap_or_default()
 }
 
-/// Frames per second drawing `frames` frames resident, and the CPU time the submitting
-/// thread spent per frame, in microseconds (Linux's per-thread accounting; 0 elsewhere).
-fn draw_rate(scene: &GpuScene, frames: u32) -> (f64, f64) {
-    let cpu = thread_cpu_ns();
-    let t = Instant::now();
-    scene.draw(frames).expect("GPU");
-    let submitted = thread_cpu_ns();
-    scene.wait().expect("GPU");
-    let fps = f64::from(frames) / t.elapsed().as_secs_f64();
-    (fps, (submitted - cpu) as f64 / 1e3 / f64::from(frames))
+/// Frames per second drawing `frames` frames resident, the median of `runs` runs, with
+/// the CPU time the submitting thread spent per frame in microseconds (median; Linux's
+/// per-thread accounting, 0 elsewhere) and the slowest and fastest run's rate.
+fn draw_rate(scene: &GpuScene, frames: u32, runs: usize) -> (f64, f64, (f64, f64)) {
+    let (mut fps, mut cpu_us) = (Vec::new(), Vec::new());
+    for _ in 0..runs {
+        let cpu = thread_cpu_ns();
+        let t = Instant::now();
+        scene.draw(frames).expect("GPU");
+        let submitted = thread_cpu_ns();
+        scene.wait().expect("GPU");
+        fps.push(f64::from(frames) / t.elapsed().as_secs_f64());
+        cpu_us.push((submitted - cpu) as f64 / 1e3 / f64::from(frames));
+    }
+    let spread = (
+        fps.iter().copied().fold(f64::INFINITY, f64::min),
+        fps.iter().copied().fold(0.0, f64::max),
+    );
+    (median(&mut fps), median(&mut cpu_us), spread)
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
 }
 
 /// Nanoseconds this thread has run, from `/proc/thread-self/schedstat`.
