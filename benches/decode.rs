@@ -130,11 +130,26 @@ fn render_gpu(_: &mut Criterion) {}
 /// Whole decodes (parse, dequantize, CPU render at the file's size) of the files named in
 /// `GSI_BENCH_FILES` (comma-separated; skipped when unset): real fitted files, for
 /// instance one written with method 2 and the same codes rewritten in the 1.0 codings by
-/// `cargo run --release --example recode`, measured in the same run.
+/// `cargo run --release --example recode`, measured in the same run. Beside them, the
+/// same files parsed and dequantized alone (`parse_file`): a random scene's codes are
+/// not what a fitted file's range coder reads.
 fn decode_files(c: &mut Criterion) {
     let Ok(list) = std::env::var("GSI_BENCH_FILES") else {
         return;
     };
+    let mut group = c.benchmark_group("parse_file");
+    group.sample_size(30).warm_up_time(Duration::from_secs(1));
+    for (i, path) in list.split(',').enumerate() {
+        let bytes = std::fs::read(path).expect("GSI_BENCH_FILES names readable files");
+        let file = std::path::Path::new(path).file_name().unwrap_or_default();
+        group.bench_function(format!("{i}-{}", file.to_string_lossy()), |b| {
+            b.iter(|| {
+                let file = read_file(black_box(&bytes[..]), Limits::default()).expect("valid");
+                file.records.to_scene()
+            })
+        });
+    }
+    group.finish();
     let mut group = c.benchmark_group("decode_file");
     group
         .sample_size(30)

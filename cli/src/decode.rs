@@ -132,6 +132,7 @@ fn decode_file(
             Err(e) => return Err(e.into()),
         },
     };
-    let bytes = format.encode(&rgb, w, ht)?;
-    io::write_output(output, &bytes).map_err(|e| Failure(format!("{}: {e}", output.display())))
+    let parts = format.encode(&rgb, w, ht)?;
+    let parts: Vec<&[u8]> = parts.iter().map(|p| p.as_ref()).collect();
+    io::write_parts(output, &parts).map_err(|e| Failure(format!("{}: {e}", output.display())))
 }

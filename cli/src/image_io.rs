@@ -5,6 +5,7 @@
 
 use crate::{io, Failure};
 use image::{DynamicImage, ImageDecoder, ImageReader};
+use std::borrow::Cow;
 use std::io::{Cursor, Read};
 use std::path::Path;
 
@@ -108,7 +109,24 @@ fn jpeg_reaches_its_end(b: &[u8]) -> bool {
 
 #[cfg(test)]
 mod tests {
-    use super::jpeg_reaches_its_end;
+    use super::{jpeg_reaches_its_end, OutputFormat};
+
+    #[test]
+    fn a_ppm_is_its_header_and_the_pixels_themselves() {
+        let rgb: Vec<u8> = (0..5 * 2 * 3).map(|i| i as u8).collect();
+        let Ok(parts) = OutputFormat::Pnm.encode(&rgb, 5, 2) else {
+            panic!("a 5×2 PPM refused")
+        };
+        let bytes = parts.concat();
+        assert!(matches!(parts[1], std::borrow::Cow::Borrowed(_)));
+        let img = image::load_from_memory(&bytes).unwrap().to_rgb8();
+        assert_eq!((img.width(), img.height()), (5, 2));
+        assert_eq!(img.as_raw(), &rgb);
+        // Pixels that are not w × h × 3 bytes are refused by every format.
+        for f in [OutputFormat::Pnm, OutputFormat::Png] {
+            assert!(f.encode(&rgb, 5, 3).is_err());
+        }
+    }
 
     /// A JPEG of `w`×`h` noise from the `image` crate's encoder.
     fn jpeg(w: u32, h: u32) -> Vec<u8> {
@@ -172,9 +190,21 @@ impl OutputFormat {
         OutputFormat::of(Path::new(&format!("x.{name}")))
     }
 
-    /// `rgb` (8-bit RGB, `w`×`h`) in this format.
-    pub fn encode(self, rgb: &[u8], w: u32, h: u32) -> Result<Vec<u8>, Failure> {
+    /// `rgb` (8-bit RGB, `w`×`h`) in this format, as the parts to write one after the
+    /// other: a PPM is its header and `rgb` itself, which is not copied (the copy cost a
+    /// whole-process decode to PPM about 4 % of its CPU time, most of it in page faults).
+    pub fn encode<'a>(self, rgb: &'a [u8], w: u32, h: u32) -> Result<Vec<Cow<'a, [u8]>>, Failure> {
         use image::ImageEncoder;
+        if rgb.len() as u64 != u64::from(w) * u64::from(h) * 3 {
+            return Err(Failure(format!(
+                "{} bytes of RGB for a {w}×{h} image",
+                rgb.len()
+            )));
+        }
+        if self == OutputFormat::Pnm {
+            let header = format!("P6\n{w} {h}\n255\n").into_bytes();
+            return Ok(vec![Cow::Owned(header), Cow::Borrowed(rgb)]);
+        }
         let mut out = Vec::new();
         let color = image::ExtendedColorType::Rgb8;
         match self {
@@ -185,12 +215,8 @@ impl OutputFormat {
                 .write_image(rgb, w, h, color)?,
             OutputFormat::WebP => image::codecs::webp::WebPEncoder::new_lossless(&mut out)
                 .write_image(rgb, w, h, color)?,
-            OutputFormat::Pnm => image::codecs::pnm::PnmEncoder::new(&mut out)
-                .with_subtype(image::codecs::pnm::PnmSubtype::Pixmap(
-                    image::codecs::pnm::SampleEncoding::Binary,
-                ))
-                .write_image(rgb, w, h, color)?,
+            OutputFormat::Pnm => unreachable!("written above"),
         }
-        Ok(out)
+        Ok(vec![Cow::Owned(out)])
     }
 }

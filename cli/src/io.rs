@@ -13,20 +13,29 @@ pub fn open_input(path: &Path) -> io::Result<Box<dyn Read>> {
     }
 }
 
-/// Write `bytes` to `path` (or standard output for `-`).
+/// Write `bytes` to `path` (or standard output for `-`), as [`write_parts`] does.
+pub fn write_output(path: &Path, bytes: &[u8]) -> io::Result<()> {
+    write_parts(path, &[bytes])
+}
+
+/// Write `parts`, one after the other, to `path` (or standard output for `-`).
 ///
 /// A file is written to a temporary sibling, synced, then renamed over the target, so a
 /// failure at any point leaves whatever was at `path` untouched.
-pub fn write_output(path: &Path, bytes: &[u8]) -> io::Result<()> {
+pub fn write_parts(path: &Path, parts: &[&[u8]]) -> io::Result<()> {
     if path == Path::new("-") {
         let mut out = io::stdout().lock();
-        out.write_all(bytes)?;
+        for part in parts {
+            out.write_all(part)?;
+        }
         return out.flush();
     }
     let tmp = temp_sibling(path);
     let result = (|| {
         let mut f = File::create(&tmp)?;
-        f.write_all(bytes)?;
+        for part in parts {
+            f.write_all(part)?;
+        }
         f.sync_all()?;
         drop(f);
         std::fs::rename(&tmp, path)?;

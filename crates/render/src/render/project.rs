@@ -257,9 +257,11 @@ pub fn project(scene: &Scene, index: usize, width: u32, height: u32) -> Option<P
 /// # Panics
 /// If the scene's attribute vectors are inconsistent ([`gsi_format::model::GaussianSet::is_consistent`]).
 pub fn project_scene(scene: &Scene, width: u32, height: u32) -> Vec<Projected> {
-    (0..scene.gaussians.len())
-        .filter_map(|i| project(scene, i, width, height))
-        .collect()
+    // Room for every Gaussian at once: most of a fitted scene is drawn, and a vector
+    // grown by doubling copies itself and faults in fresh pages at each step.
+    let mut out = Vec::with_capacity(scene.gaussians.len());
+    out.extend((0..scene.gaussians.len()).filter_map(|i| project(scene, i, width, height)));
+    out
 }
 
 /// Pixels `i` of `0..n` whose centre `i + 0.5` lies in `[m - r, m + r]`, as an inclusive
