@@ -21,6 +21,14 @@ struct SortParams {
     capacity: u32,
     // Bits of this pass's digit, 1 to 11.
     bits: u32,
+    // Where not 0, this pass's digit is the whole key, every key is below `ranges`, and
+    // the scan also writes the first output slot of each key 0..=ranges into
+    // `ranges_out` (the last one the live count): a tile list's ranges, without a
+    // dispatch of their own.
+    ranges: u32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
 }
 
 fn sort_bins() -> u32 {

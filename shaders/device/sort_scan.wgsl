@@ -16,6 +16,8 @@
 @group(0) @binding(1) var<storage, read_write> hist: array<u32>;
 // One per chunk: its sum.
 @group(0) @binding(2) var<storage, read_write> chunk_sums: array<u32>;
+// With `params.ranges`, the first slot of each key 0..=ranges (see sort_common.wgsl).
+@group(0) @binding(3) var<storage, read_write> ranges_out: array<u32>;
 
 var<workgroup> sums: array<u32, 256>;
 
@@ -92,9 +94,20 @@ fn apply(@builtin(workgroup_id) wg: vec3<u32>,
     sums[lid] = s;
     scan_sums(lid);
     var run = offset + sums[lid] - s;
+    let ranges = params.ranges;
     for (var i = share.x; i < share.y; i = i + 1u) {
         let count = hist[i];
         hist[i] = run;
+        // Block 0 of digit d: the first slot of key d. For d = ranges below the last
+        // digit, every live key is below it, so that slot is the live count.
+        if (ranges != 0u && i % params.blocks == 0u && i / params.blocks <= ranges) {
+            ranges_out[i / params.blocks] = run;
+        }
         run = run + count;
+    }
+    // Where the keys use every digit, the end of the last range is the histogram's total,
+    // which the one invocation holding its last count has.
+    if (ranges != 0u && ranges == sort_bins() && share.x < share.y && share.y == hist_len()) {
+        ranges_out[ranges] = run;
     }
 }

@@ -235,18 +235,14 @@ impl<'g> ResidentFit<'g> {
             let (f, b, l) = (&self.forward, &self.back, &self.lists);
             let mut enc = gpu.encoder();
             f.record_binning(gpu, &l.forward, &mut enc, qat.is_some());
-            let [tiles, render] = f.render(gpu, &l.forward);
             let tile_grid = (self.uniform.tiles_x, self.uniform.tiles_y);
-            gpu.pass(
-                &mut enc,
-                &[
-                    tiles,
-                    render,
-                    (&k.loss, &b.loss, b.pixel_groups),
-                    (backward.of(self.blend), &l.backward, tile_grid),
-                    (&k.adam, &l.adam, f.gaussian_groups),
-                ],
-            );
+            let mut dispatches = f.render(gpu, &l.forward);
+            dispatches.extend([
+                (&k.loss, &b.loss, b.pixel_groups),
+                (backward.of(self.blend), &l.backward, tile_grid),
+                (&k.adam, &l.adam, f.gaussian_groups),
+            ]);
+            gpu.pass(&mut enc, &dispatches);
             let earlier = self.pending.take();
             let capacity = l.forward.capacity;
             if measure {

@@ -188,6 +188,8 @@ pub struct ForwardLists {
     pub capacity: u32,
     /// Gaussian of each sorted entry: tile t lists `values[offsets[t]..offsets[t + 1]]`.
     pub values: wgpu::Buffer,
+    /// Whether the sort writes the tile ranges (`f.offsets`), so `fit_tiles` need not.
+    ranges_by_sort: bool,
     plan: SortPlan,
     emit: wgpu::BindGroup,
     tiles: wgpu::BindGroup,
@@ -305,16 +307,19 @@ impl Forward {
         lists.plan.record(&k.sort, enc);
     }
 
-    /// The tile ranges and the render, to run after [`Forward::record_binning`].
-    pub fn render<'a>(&'a self, gpu: &'a Gpu, lists: &'a ForwardLists) -> [Dispatch<'a>; 2] {
-        [
-            (
+    /// The tile ranges (unless the sort wrote them) and the render, to run after
+    /// [`Forward::record_binning`].
+    pub fn render<'a>(&'a self, gpu: &'a Gpu, lists: &'a ForwardLists) -> Vec<Dispatch<'a>> {
+        let mut dispatches = Vec::with_capacity(2);
+        if !lists.ranges_by_sort {
+            dispatches.push((
                 &ForwardKernels::of(gpu).tiles,
                 &lists.tiles,
                 self.tile_groups,
-            ),
-            (&gpu.render, &lists.render, self.tiles),
-        ]
+            ));
+        }
+        dispatches.push((&gpu.render, &lists.render, self.tiles));
+        dispatches
     }
 }
 
@@ -334,7 +339,10 @@ impl ForwardLists {
         let values = gpu.zeroed(u64::from(capacity) * 4);
         let tiles = f.tiles.0 * f.tiles.1;
         let key_bits = (32 - tiles.saturating_sub(1).leading_zeros()).max(1);
-        let plan = SortPlan::new(gpu, &k.sort, &keys, &values, &f.entries, capacity, key_bits)?;
+        let mut plan = SortPlan::new(gpu, &k.sort, &keys, &values, &f.entries, capacity, key_bits)?;
+        // Sorted in one pass (up to 2048 tiles, 768×512 at 16×16), the scan's offsets are
+        // the tile ranges: one dispatch fewer a frame.
+        let ranges_by_sort = plan.write_ranges(gpu, &k.sort, &f.offsets, tiles);
         let (sorted_keys, sorted_values) = plan.sorted();
         Ok(ForwardLists {
             capacity,
@@ -356,6 +364,7 @@ impl ForwardLists {
                 ],
             ),
             values: sorted_values.clone(),
+            ranges_by_sort,
             plan,
         })
     }

@@ -1086,9 +1086,13 @@ pub mod tests {
                 pad = "pad0"
             ]
         );
-        // The sort takes four `u32` as an array.
+        // The sort takes eight `u32` as an array, and `SortPlan::write_ranges` writes
+        // `ranges` at `RANGES_AT`.
         let source = shader!("device/sort_common", "device/sort_scan");
-        assert_eq!(super::uniform_layout(&source).0 as usize, 16);
+        let (size, fields) = super::uniform_layout(&source);
+        assert_eq!(size, 32);
+        let at = super::sort::RANGES_AT as u32;
+        assert!(fields.contains(&("ranges".to_string(), at)), "{fields:?}");
     }
 
     /// A kernel set that fails to build is an error and is not cached: the next request

@@ -21,6 +21,10 @@ pub const SCAN_PER: u32 = 16;
 
 /// Items per block, one workgroup's share (`SORT_BLOCK` of the shaders' prelude).
 pub const BLOCK: u32 = 1024;
+/// Byte offset of `ranges` in the shaders' `SortParams` (eight `u32`: shift, blocks,
+/// capacity, bits, ranges, padding), checked against the WGSL by a test of `gpu`.
+pub(crate) const RANGES_AT: u64 = 16;
+
 /// Invocations per workgroup of every sort kernel (`SORT_WG` of the shaders).
 const WORKGROUP: u64 = 256;
 
@@ -60,7 +64,7 @@ impl RadixSort {
                 &shader!("device/sort_common", "device/sort_scan"),
                 ["chunks", "apply"],
                 0,
-                2,
+                3,
             ),
             scatter: Kernel::new(
                 device,
@@ -73,11 +77,12 @@ impl RadixSort {
     }
 }
 
-/// The bind groups of one pass (one digit).
+/// The bind groups of one pass (one digit), and its uniform block.
 struct Pass {
     histogram: wgpu::BindGroup,
     scan: wgpu::BindGroup,
     scatter: wgpu::BindGroup,
+    params: wgpu::Buffer,
 }
 
 /// Scratch buffers and bind groups for sorting `keys`/`values` (each `capacity` u32s,
@@ -96,6 +101,10 @@ pub struct SortPlan {
     /// the plan's scratch after an odd one (read there rather than copied back: a copy
     /// costs a frame as much as a dispatch).
     sorted: (wgpu::Buffer, wgpu::Buffer),
+    /// The histogram and the scan's chunk sums, for [`SortPlan::write_ranges`].
+    scan_buffers: Option<(wgpu::Buffer, wgpu::Buffer)>,
+    /// Bits of each pass's digit.
+    digit_bits: u32,
 }
 
 impl SortPlan {
@@ -148,6 +157,8 @@ impl SortPlan {
                 groups: (0, 0),
                 scan_groups: (0, 0),
                 sorted: (keys.clone(), values.clone()),
+                scan_buffers: None,
+                digit_bits: 0,
             });
         }
         let storage = |size: u64| {
@@ -165,6 +176,8 @@ impl SortPlan {
         // The scan's chunks of the histogram, one workgroup each.
         let chunks = (bins * u64::from(blocks)).div_ceil(WORKGROUP * u64::from(SCAN_PER)) as u32;
         let chunk_sums = storage(u64::from(chunks.max(1)) * 4);
+        // The scan's ranges output until `write_ranges` names one: never written.
+        let no_ranges = storage(4);
         let cx = chunks.clamp(1, max_groups);
         let scan_groups = (cx, chunks.div_ceil(cx).max(1));
         // Pass p reads `from` and writes `to`, alternating caller → scratch → caller. The
@@ -172,20 +185,22 @@ impl SortPlan {
         let (mut from, mut to) = ((keys, values), (&scratch_keys, &scratch_values));
         let passes = (0..passes)
             .map(|p| {
-                let params = [p * digit_bits, blocks, capacity, digit_bits];
+                // `SortParams`: shift, blocks, capacity, bits, ranges (none yet), padding.
+                let params = [p * digit_bits, blocks, capacity, digit_bits, 0, 0, 0, 0u32];
                 let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                     label: Some("sort params"),
                     contents: bytemuck::cast_slice(&params),
-                    usage: wgpu::BufferUsages::UNIFORM,
+                    usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
                 });
                 let pass = Pass {
                     histogram: sort
                         .histogram
                         .bind(device, &[&params, count, from.0, &hist]),
-                    scan: sort.scan[0].bind(device, &[&params, &hist, &chunk_sums]),
+                    scan: sort.scan[0].bind(device, &[&params, &hist, &chunk_sums, &no_ranges]),
                     scatter: sort
                         .scatter
                         .bind(device, &[&params, count, from.0, from.1, &hist, to.0, to.1]),
+                    params,
                 };
                 std::mem::swap(&mut from, &mut to);
                 pass
@@ -196,7 +211,34 @@ impl SortPlan {
             groups,
             scan_groups,
             sorted: (from.0.clone(), from.1.clone()),
+            scan_buffers: Some((hist, chunk_sums)),
+            digit_bits,
         })
+    }
+
+    /// Have the sort also write, into `out[0..=n]`, the first sorted slot of each key
+    /// `0..=n` (`out[n]` the live count): where the keys are tiles, each tile's range of
+    /// the sorted pairs, which then needs no dispatch of its own. Only a sort of one pass
+    /// can, whose digit is the whole key; the caller promises every key is below `n`.
+    /// Returns whether it will (false: one pass is not enough for `n` keys, or `out`
+    /// holds fewer than `n + 1` u32s), for the next [`SortPlan::record`] on.
+    pub fn write_ranges(
+        &mut self,
+        gpu: &super::Gpu,
+        sort: &RadixSort,
+        out: &wgpu::Buffer,
+        n: u32,
+    ) -> bool {
+        let (Some((hist, chunk_sums)), [pass]) = (&self.scan_buffers, &mut self.passes[..]) else {
+            return false;
+        };
+        if n == 0 || u64::from(n) > 1 << self.digit_bits || out.size() < (u64::from(n) + 1) * 4 {
+            return false;
+        }
+        gpu.queue
+            .write_buffer(&pass.params, RANGES_AT, bytemuck::bytes_of(&n));
+        pass.scan = sort.scan[0].bind(&gpu.device, &[&pass.params, hist, chunk_sums, out]);
+        true
     }
 
     /// The keys and values buffers that hold the sorted pairs after [`SortPlan::record`].
@@ -315,6 +357,63 @@ mod tests {
         assert_eq!(digits(16), (2, 8));
         assert_eq!(digits(23), (3, 8));
         assert_eq!(digits(32), (3, 11));
+    }
+
+    #[test]
+    fn a_one_pass_sort_writes_the_ranges_of_its_keys() {
+        let Some(gpu) = gpu() else { return };
+        let sort = kernels(&gpu);
+        let mut rng = SplitMix64::new(13);
+        // Fewer keys than bins, as many, a live count short of the capacity, and none.
+        for (n, len, count) in [
+            (5u32, 3000usize, 3000u32),
+            (1536, 100_000, 100_000),
+            (2048, 5000, 3001),
+            (1536, 4096, 0),
+        ] {
+            let keys: Vec<u32> = (0..len)
+                .map(|_| (rng.next_u64() % u64::from(n)) as u32)
+                .collect();
+            let values: Vec<u32> = (0..len as u32).collect();
+            let bits = 32 - (n - 1).leading_zeros();
+            let (kb, vb, cb) = (
+                buffer(&gpu, &keys),
+                buffer(&gpu, &values),
+                buffer(&gpu, &[count]),
+            );
+            let out = buffer(&gpu, &vec![u32::MAX; n as usize + 1]);
+            let mut plan = SortPlan::new(&gpu, &sort, &kb, &vb, &cb, len as u32, bits).unwrap();
+            assert!(plan.write_ranges(&gpu, &sort, &out, n));
+            let mut enc = gpu.encoder();
+            plan.record(&sort, &mut enc);
+            gpu.submit([enc.finish()]);
+            // want[d]: the live keys below d.
+            let mut want = vec![0u32; n as usize + 1];
+            for &k in &keys[..(count as usize).min(len)] {
+                want[k as usize + 1] += 1;
+            }
+            for d in 1..want.len() {
+                want[d] += want[d - 1];
+            }
+            assert_eq!(
+                read(&gpu, &out, want.len()),
+                want,
+                "{n} keys, count {count}"
+            );
+        }
+        // Keys of two passes, or too small an output: the plan says it cannot.
+        let (k, v, c) = (
+            buffer(&gpu, &[0; 16]),
+            buffer(&gpu, &[0; 16]),
+            buffer(&gpu, &[16]),
+        );
+        let out = buffer(&gpu, &[0; 4]);
+        let mut two = SortPlan::new(&gpu, &sort, &k, &v, &c, 16, 12).unwrap();
+        assert!(!two.write_ranges(&gpu, &sort, &out, 3));
+        let mut one = SortPlan::new(&gpu, &sort, &k, &v, &c, 16, 4).unwrap();
+        assert!(!one.write_ranges(&gpu, &sort, &out, 16));
+        assert!(!one.write_ranges(&gpu, &sort, &out, 17));
+        assert!(one.write_ranges(&gpu, &sort, &out, 3));
     }
 
     #[test]
