@@ -4,7 +4,8 @@
 //! again and again (what a viewer, or a frame-rate measurement, does).
 //!
 //! Kernels: `fit_range` (quantization-aware steps only), `fit_project`, `fit_scan`,
-//! `fit_emit`, the radix sort (`gpu::sort`), `fit_tiles`, then `render`.
+//! `fit_emit`, the radix sort (`gpu::sort`), `fit_tiles` (only where the sort takes more
+//! than one pass: a one-pass sort writes the tile ranges itself), then `render`.
 
 // Without the stages (feature `encode`) only `GpuScene` draws with this half; the
 // buffers and helpers the resident fit adds to it go unused.
@@ -340,8 +341,8 @@ impl ForwardLists {
         let tiles = f.tiles.0 * f.tiles.1;
         let key_bits = (32 - tiles.saturating_sub(1).leading_zeros()).max(1);
         let mut plan = SortPlan::new(gpu, &k.sort, &keys, &values, &f.entries, capacity, key_bits)?;
-        // Sorted in one pass (up to 2048 tiles, 768×512 at 16×16), the scan's offsets are
-        // the tile ranges: one dispatch fewer a frame.
+        // Sorted in one pass (up to 2048 tiles: 768×512 has 1536), the sort's scan holds
+        // the tile ranges and writes them: one dispatch fewer a frame.
         let ranges_by_sort = plan.write_ranges(gpu, &k.sort, &f.offsets, tiles);
         let (sorted_keys, sorted_values) = plan.sorted();
         Ok(ForwardLists {
