@@ -137,12 +137,20 @@ fn decode_files(c: &mut Criterion) {
     let Ok(list) = std::env::var("GSI_BENCH_FILES") else {
         return;
     };
+    // Numbered, so that a file may be named twice to alternate runs.
+    let files: Vec<(String, Vec<u8>)> = list
+        .split(',')
+        .enumerate()
+        .map(|(i, path)| {
+            let bytes = std::fs::read(path).expect("GSI_BENCH_FILES names readable files");
+            let name = std::path::Path::new(path).file_name().unwrap_or_default();
+            (format!("{i}-{}", name.to_string_lossy()), bytes)
+        })
+        .collect();
     let mut group = c.benchmark_group("parse_file");
     group.sample_size(30).warm_up_time(Duration::from_secs(1));
-    for (i, path) in list.split(',').enumerate() {
-        let bytes = std::fs::read(path).expect("GSI_BENCH_FILES names readable files");
-        let file = std::path::Path::new(path).file_name().unwrap_or_default();
-        group.bench_function(format!("{i}-{}", file.to_string_lossy()), |b| {
+    for (name, bytes) in &files {
+        group.bench_function(name, |b| {
             b.iter(|| {
                 let file = read_file(black_box(&bytes[..]), Limits::default()).expect("valid");
                 file.records.to_scene()
@@ -156,16 +164,12 @@ fn decode_files(c: &mut Criterion) {
         .warm_up_time(Duration::from_secs(1))
         .measurement_time(Duration::from_secs(5))
         .sampling_mode(SamplingMode::Flat);
-    for (i, path) in list.split(',').enumerate() {
-        let bytes = std::fs::read(path).expect("GSI_BENCH_FILES names readable files");
+    for (name, bytes) in &files {
         let h = read_file(&bytes[..], Limits::default())
             .expect("a valid file")
             .records
             .header;
         let mut out = vec![0.0f32; (h.width * h.height * 3) as usize];
-        // Numbered, so that a file may be named twice to alternate runs.
-        let file = std::path::Path::new(path).file_name().unwrap_or_default();
-        let name = format!("{i}-{}", file.to_string_lossy());
         group.bench_function(name, |b| {
             b.iter(|| {
                 let file = read_file(black_box(&bytes[..]), Limits::default()).expect("valid");

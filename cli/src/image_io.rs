@@ -201,10 +201,6 @@ impl OutputFormat {
                 rgb.len()
             )));
         }
-        if self == OutputFormat::Pnm {
-            let header = format!("P6\n{w} {h}\n255\n").into_bytes();
-            return Ok(vec![Cow::Owned(header), Cow::Borrowed(rgb)]);
-        }
         let mut out = Vec::new();
         let color = image::ExtendedColorType::Rgb8;
         match self {
@@ -215,7 +211,10 @@ impl OutputFormat {
                 .write_image(rgb, w, h, color)?,
             OutputFormat::WebP => image::codecs::webp::WebPEncoder::new_lossless(&mut out)
                 .write_image(rgb, w, h, color)?,
-            OutputFormat::Pnm => unreachable!("written above"),
+            OutputFormat::Pnm => {
+                let header = format!("P6\n{w} {h}\n255\n").into_bytes();
+                return Ok(vec![Cow::Owned(header), Cow::Borrowed(rgb)]);
+            }
         }
         Ok(vec![Cow::Owned(out)])
     }

@@ -7,9 +7,9 @@
 //! them, and a scatter that ranks equal digits by position (a bitonic sort of the block),
 //! never by atomic counters, so the output is the same on every run and every adapter.
 //! Wide digits because passes, not items, are what a frame's sort costs: a 768×512
-//! frame's 1536 tile keys take one pass of 11 bits instead of two of 8. The live length is a `u32` on the GPU
-//! (written by an earlier kernel), which the host never reads: every kernel is dispatched
-//! for the buffers' capacity and ignores the items past the count.
+//! frame's 1536 tile keys take one pass of 11 bits instead of two of 8. The live length
+//! is a `u32` on the GPU (written by an earlier kernel), which the host never reads: every
+//! kernel is dispatched for the buffers' capacity and ignores the items past the count.
 
 use super::Kernel;
 use super::{Error, ErrorKind, Result};
