@@ -105,13 +105,23 @@ impl Footprint<'_> {
     /// [`Footprint::alphas_with`], which [`Footprint::alphas_of`] completes.
     #[inline(always)]
     pub(crate) fn powers<const F: bool>(&self, start: usize, dy: f32) -> (V, V) {
+        self.powers_n::<F, LANES>(start, dy)
+    }
+
+    /// [`Footprint::powers`] on `N` columns.
+    #[inline(always)]
+    fn powers_n<const F: bool, const N: usize>(
+        &self,
+        start: usize,
+        dy: f32,
+    ) -> ([f32; N], [f32; N]) {
         let g = self.g;
         let [ca, cb, cc] = g.conic;
         let cdy = cc * dy * dy;
         let first = self.x0 + start as u32;
-        let mut power = [0f32; LANES];
-        let mut dxs = [0f32; LANES];
-        for l in 0..LANES {
+        let mut power = [0f32; N];
+        let mut dxs = [0f32; N];
+        for l in 0..N {
             let dx = offset(first.wrapping_add(l as u32), g.mean[0]);
             // -0.5·(A dx² + C dy²) − B dx dy
             power[l] = mla::<F>(-0.5, mla::<F>(ca * dx, dx, cdy), -(cb * dx * dy));
@@ -310,11 +320,12 @@ fn tile<const JOIN: bool>(
     }
 }
 
-/// Blend `into` the alphas of footprint `f` chunk-row by chunk-row (the index of the
-/// chunk's first pixel in [`Acc`] and its [`LANES`] alphas, 0 where the Gaussian does not
-/// touch the pixel), down each chunk column in turn; chunk-rows that take no light may be
-/// skipped. With `COLUMNS`, by the column rule of spec §6.3.2 (per pixel for a Gaussian
-/// steeper than [`COLUMN_STEEP`]), else by §6.3's per-pixel rule. With `CAP`, alphas are
+/// Blend `into` the alphas of footprint `f` row by row (the index of the first pixel in
+/// [`Acc`] and the alphas of [`LANES`] pixels or of a tile row, 0 where the Gaussian does
+/// not touch the pixel), down each chunk column in turn or down the tile's two together;
+/// chunk-rows that take no light may be skipped. With `COLUMNS`, by the column rule of
+/// spec §6.3.2 (per pixel for a Gaussian steeper than [`COLUMN_STEEP`]), else by §6.3's
+/// per-pixel rule. With `CAP`, alphas are
 /// capped at [`ALPHA_MAX`] before the threshold, as `alpha` blending does.
 #[inline(always)]
 fn chunk_rows<const JOIN: bool, const CAP: bool, const COLUMNS: bool>(
@@ -339,62 +350,112 @@ fn chunk_rows<const JOIN: bool, const CAP: bool, const COLUMNS: bool>(
         }
         return;
     }
-    // The column rule: `w` the weight, `r` its ratio to the next row's, `k` the ratio of
-    // successive `r` (the power is a parabola down a column, its second difference −C).
-    let k = exp(-g.conic[2]);
-    for start in f.starts() {
-        let mask = f.inside_lanes(start);
-        // Every lane starts dark (w = 0). A lane outside the box's columns, no pixel of
-        // the rule, counts as carried, so that it never asks for a power or an `E`: it
-        // carries its 0, and its factor of 0 keeps it out of every alpha.
-        let (mut w, mut r) = ([0f32; LANES], [0f32; LANES]);
-        // (Conditions are folded and tested lane by lane where they are used rather than
-        // kept in arrays of booleans, which LLVM packs to bytes and back, splitting the
-        // lanes of `w` and `r` across registers.)
-        let carried = |w: f32, m: f32| (w >= COLUMN_DARK) | (m == 0.0);
-        for j in f.ys.clone() {
-            let (mut wn, mut rn) = ([0f32; LANES], [0f32; LANES]);
-            for l in 0..LANES {
-                wn[l] = w[l] * r[l];
-                rn[l] = r[l] * k;
-            }
-            if (0..LANES).fold(true, |all, l| all & carried(w[l], mask[l])) {
-                (w, r) = (wn, rn);
-            } else {
-                // A lane not carried starts where its power reaches the start level, with
-                // `E`; below it, it stays dark.
-                let (power, dxs) = f.powers::<false>(start, dy(j));
-                let any = (0..LANES).fold(false, |any, l| {
-                    any | (!carried(w[l], mask[l]) & (power[l] >= COLUMN_START))
-                });
-                let (w1, r1) = if any {
-                    f.column_start(&power, &dxs, dy(j), dy(j + 1))
-                } else {
-                    ([0f32; LANES], [0f32; LANES])
-                };
-                for l in 0..LANES {
-                    let (c, go) = (carried(w[l], mask[l]), power[l] >= COLUMN_START);
-                    w[l] = if c {
-                        wn[l]
-                    } else if go {
-                        w1[l]
-                    } else {
-                        0.0
-                    };
-                    r[l] = if c { rn[l] } else { r1[l] };
-                }
-            }
-            // `mask` is 1 or 0: `a·1` is `a`. Every chunk-row is blended, lit or not:
-            // adding 0 changes no sum and multiplies no transmittance, and a branch on
-            // "lit" measured no faster.
-            let mut alpha = [0f32; LANES];
-            for l in 0..LANES {
-                let a = g.opacity * w[l];
-                let a = (if CAP { a.min(ALPHA_MAX) } else { a }) * mask[l];
-                alpha[l] = if a >= ALPHA_MIN { a } else { 0.0 };
-            }
-            into.blend(g, at(start, j), &alpha);
+    // The column rule, on the tile's aligned chunks that the box meets: both of them at
+    // once where it meets both (see `column_rows`).
+    let k = g.column_k();
+    let first = f.lx0 / LANES;
+    if (f.lx1 - 1) / LANES == first {
+        column_rows::<LANES, CAP>(f, first * LANES, k, rect, into);
+    } else {
+        column_rows::<TILE_W, CAP>(f, 0, k, rect, into);
+    }
+}
+
+/// All ones where `b`, else 0: a lane mask for selecting bits.
+#[inline(always)]
+fn lanes_mask(b: bool) -> u32 {
+    u32::from(b).wrapping_neg()
+}
+
+// A tile row is two chunks, so that a box meets one chunk or both.
+const _: () = assert!(TILE_W == 2 * LANES);
+
+/// The column rule of spec §6.3.2 for footprint `f` on the `N` columns of a tile row
+/// from tile-local column `start` (a multiple of [`LANES`]), `k = E(−C)`.
+///
+/// The chunks are the tile's own, not ones from the box's first column: a box then meets
+/// at most two, and where it meets both they go down the rows together, which halves the
+/// loop's steps and gives the processor two independent chains of products (each row's
+/// weight waits on the row above's). Every lane computes what it would alone, so the
+/// image is the same bits. (Chunks from the box's first column also overlapped the
+/// previous Gaussian's stores at other offsets.)
+#[inline(always)]
+fn column_rows<const N: usize, const CAP: bool>(
+    f: &Footprint,
+    start: usize,
+    k: f32,
+    rect: Rect,
+    into: &mut impl Blender,
+) {
+    let g = f.g;
+    let at = |j: u32| (j - rect.y0) as usize * ACC_W + start;
+    let dy = |j: u32| offset(j, g.mean[1]);
+    let mask = f.inside_lanes::<N>(start);
+    // `w` the weight, `r` its ratio to the next row's, `k` the ratio of successive `r`
+    // (the power is a parabola down a column, its second difference −C). Every lane
+    // starts dark (w = 0). A lane outside the box's columns, no pixel of the rule, counts
+    // as carried, so that it never asks for a power or an `E`: it carries its 0, and its
+    // factor of 0 keeps it out of every alpha.
+    let (mut w, mut r) = ([0f32; N], [0f32; N]);
+    // (Conditions are folded and tested lane by lane where they are used rather than
+    // kept in arrays of booleans, which LLVM packs to bytes and back, splitting the
+    // lanes of `w` and `r` across registers.)
+    let carried = |w: f32, m: f32| (w >= COLUMN_DARK) | (m == 0.0);
+    let all_carried = |w: &[f32; N]| (0..N).fold(true, |all, l| all & carried(w[l], mask[l]));
+    let alphas = |w: &[f32; N]| {
+        // `mask` is 1 or 0: `a·1` is `a`. Every chunk-row is blended, lit or not: adding
+        // 0 changes no sum and multiplies no transmittance, and a branch on "lit"
+        // measured no faster.
+        let mut alpha = [0f32; N];
+        for l in 0..N {
+            let a = g.opacity * w[l];
+            let a = (if CAP { a.min(ALPHA_MAX) } else { a }) * mask[l];
+            alpha[l] = if a >= ALPHA_MIN { a } else { 0.0 };
         }
+        alpha
+    };
+    let mut j = f.ys.start;
+    while j < f.ys.end {
+        // The rows where every lane is carried: two products per lane, in a loop of its
+        // own so that `w` and `r` stay in registers (in one loop with the start below,
+        // LLVM kept them on the stack, and each row waited for a store and a load).
+        while j < f.ys.end && all_carried(&w) {
+            for l in 0..N {
+                (w[l], r[l]) = (w[l] * r[l], r[l] * k);
+            }
+            into.blend(g, at(j), &alphas(&w));
+            j += 1;
+        }
+        if j == f.ys.end {
+            break;
+        }
+        // A row with a lane not carried: that lane starts where its power reaches the
+        // start level, with `E`; below it, it stays dark.
+        let (mut wn, mut rn) = ([0f32; N], [0f32; N]);
+        for l in 0..N {
+            wn[l] = w[l] * r[l];
+            rn[l] = r[l] * k;
+        }
+        let (power, dxs) = f.powers_n::<false, N>(start, dy(j));
+        let any = (0..N).fold(false, |any, l| {
+            any | (!carried(w[l], mask[l]) & (power[l] >= COLUMN_START))
+        });
+        let (w1, r1) = if any {
+            f.column_start(&power, &dxs, dy(j), dy(j + 1))
+        } else {
+            ([0f32; N], [0f32; N])
+        };
+        // The selects as masks on the bits: as `if`s, LLVM took the packed bytes of the
+        // test above apart and branched lane by lane.
+        for l in 0..N {
+            let c = lanes_mask(carried(w[l], mask[l]));
+            let go = lanes_mask(power[l] >= COLUMN_START);
+            let started = w1[l].to_bits() & go;
+            w[l] = f32::from_bits((wn[l].to_bits() & c) | (started & !c));
+            r[l] = f32::from_bits((rn[l].to_bits() & c) | (r1[l].to_bits() & !c));
+        }
+        into.blend(g, at(j), &alphas(&w));
+        j += 1;
     }
 }
 
@@ -412,7 +473,7 @@ impl Footprint<'_> {
     /// columns, 0 in the others: a factor of the alpha, so that its one test also turns
     /// away the lanes outside the box.
     #[inline(always)]
-    fn inside_lanes(&self, start: usize) -> V {
+    fn inside_lanes<const N: usize>(&self, start: usize) -> [f32; N] {
         let (lx0, lx1) = self.box_lanes(start);
         std::array::from_fn(|l| f32::from(u8::from((l as i32 >= lx0) & ((l as i32) < lx1))))
     }
@@ -422,11 +483,17 @@ impl Footprint<'_> {
     /// offsets `dxs`: `w = E(power)` and `r = E(step)`, the step `−0.5·(C·(dy + dy1)) −
     /// B·dx` of the power to the next row.
     #[inline(always)]
-    fn column_start(&self, power: &V, dxs: &V, dy: f32, dy1: f32) -> (V, V) {
+    fn column_start<const N: usize>(
+        &self,
+        power: &[f32; N],
+        dxs: &[f32; N],
+        dy: f32,
+        dy1: f32,
+    ) -> ([f32; N], [f32; N]) {
         let [_, cb, cc] = self.g.conic;
         let half = -0.5 * (cc * (dy + dy1));
-        let (mut w, mut r) = ([0f32; LANES], [0f32; LANES]);
-        for l in 0..LANES {
+        let (mut w, mut r) = ([0f32; N], [0f32; N]);
+        for l in 0..N {
             w[l] = exp(power[l]);
             r[l] = exp(half - cb * dxs[l]);
         }
@@ -436,8 +503,8 @@ impl Footprint<'_> {
 
 /// Where a chunk-row of alphas goes (a trait rather than a closure: see the module's doc).
 trait Blender {
-    /// Blend Gaussian `g`'s `alpha` into the [`LANES`] pixels from `at` of the tile.
-    fn blend(&mut self, g: &Projected, at: usize, alpha: &V);
+    /// Blend Gaussian `g`'s `alpha` into the `N` pixels from `at` of the tile.
+    fn blend<const N: usize>(&mut self, g: &Projected, at: usize, alpha: &[f32; N]);
 }
 
 /// `sum` blending: `acc += c·alpha`.
@@ -445,13 +512,13 @@ struct Sum<'a>(&'a mut Acc);
 
 impl Blender for Sum<'_> {
     #[inline(always)]
-    fn blend(&mut self, g: &Projected, at: usize, alpha: &V) {
+    fn blend<const N: usize>(&mut self, g: &Projected, at: usize, alpha: &[f32; N]) {
         let color = g.color;
         for (plane, c) in self.0 .0.iter_mut().zip(color) {
-            let px = &mut plane[at..at + LANES];
+            let px = &mut plane[at..at + N];
             // Where alpha is 0 this adds ±0, which leaves every sum as it is: a sum that
             // starts at +0 is never −0.
-            for l in 0..LANES {
+            for l in 0..N {
                 px[l] += c * alpha[l];
             }
         }
@@ -468,11 +535,11 @@ struct Over<'a> {
 
 impl Blender for Over<'_> {
     #[inline(always)]
-    fn blend(&mut self, g: &Projected, at: usize, alpha: &V) {
-        let t = &mut self.trans[at..at + LANES];
-        let mut a = [0f32; LANES];
+    fn blend<const N: usize>(&mut self, g: &Projected, at: usize, alpha: &[f32; N]) {
+        let t = &mut self.trans[at..at + N];
+        let mut a = [0f32; N];
         let mut died = 0;
-        for l in 0..LANES {
+        for l in 0..N {
             // A pixel that stopped takes nothing more; alpha 0 leaves `t` as it is.
             a[l] = if t[l] < TRANSMITTANCE_MIN {
                 0.0
@@ -481,12 +548,12 @@ impl Blender for Over<'_> {
             };
         }
         for (ch, plane) in self.acc.0.iter_mut().enumerate() {
-            let px = &mut plane[at..at + LANES];
-            for l in 0..LANES {
+            let px = &mut plane[at..at + N];
+            for l in 0..N {
                 px[l] += g.color[ch] * a[l] * t[l];
             }
         }
-        for l in 0..LANES {
+        for l in 0..N {
             let before = t[l];
             t[l] = before * (1.0 - a[l]);
             died += usize::from((before >= TRANSMITTANCE_MIN) & (t[l] < TRANSMITTANCE_MIN));

@@ -88,6 +88,8 @@ pub struct Projected {
     pub bbox: PixelBox,
     /// [`Projected::cutoff`], computed once here: every tile a Gaussian visits asks for it.
     cut: f32,
+    /// [`Projected::column_k`], computed once here for the same reason.
+    column_k: f32,
 }
 
 impl Projected {
@@ -175,6 +177,13 @@ impl Projected {
     pub fn cutoff(&self) -> f32 {
         self.cut
     }
+
+    /// `k = E(−C)` of the column rule (spec §6.3.2): the ratio of successive ratios `r`
+    /// down a column.
+    #[inline]
+    pub fn column_k(&self) -> f32 {
+        self.column_k
+    }
 }
 
 /// [`Projected::cutoff`] for an opacity.
@@ -248,6 +257,7 @@ pub fn project(scene: &Scene, index: usize, width: u32, height: u32) -> Option<P
         color,
         bbox: PixelBox { x0, y0, x1, y1 },
         cut: cutoff_of(opacity),
+        column_k: exp(-conic[2]),
     })
 }
 
@@ -392,6 +402,7 @@ mod tests {
                 y1: 40,
             },
             cut: cutoff_of(1.0),
+            column_k: exp(-0.25),
         };
         let bits = |row, rule| p.weight_at(1, row, Blend::Sum, rule).map(f32::to_bits);
         let columns = [0x3F7C07F5, 0x3F657A17, 0x3F22B938, 0x3EB3BA9B];
