@@ -70,7 +70,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>,
         atomicStore(&live, 0u);
     }
     workgroupBarrier();
-    if (inside) {
+    // Only `alpha` blending stops early, so only it counts the pixels still
+    // accumulating: in `sum` every pixel of a tile adding to one counter was the same
+    // address written 256 times over.
+    let stops = params.blend != 0u;
+    if (stops && inside) {
         atomicAdd(&live, 1u);
     }
     let range = workgroupUniformLoad(&list);
@@ -129,11 +133,13 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>,
         // Every pixel is done with this batch before the next overwrites it, and every
         // pixel that stopped has said so before the count is read.
         workgroupBarrier();
-        if (li == 0u) {
-            live_read = atomicLoad(&live);
-        }
-        if (workgroupUniformLoad(&live_read) == 0u) {
-            break;
+        if (stops) {
+            if (li == 0u) {
+                live_read = atomicLoad(&live);
+            }
+            if (workgroupUniformLoad(&live_read) == 0u) {
+                break;
+            }
         }
     }
     if (inside) {
