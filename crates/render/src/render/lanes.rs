@@ -377,8 +377,7 @@ const _: () = assert!(TILE_W == 2 * LANES);
 /// at most two, and where it meets both they go down the rows together, which halves the
 /// loop's steps and gives the processor two independent chains of products (each row's
 /// weight waits on the row above's). Every lane computes what it would alone, so the
-/// image is the same bits. (Chunks from the box's first column also overlapped the
-/// previous Gaussian's stores at other offsets.)
+/// image is the same bits.
 #[inline(always)]
 fn column_rows<const N: usize, const CAP: bool>(
     f: &Footprint,
