@@ -1,9 +1,10 @@
 //! `gsi decode`: render a file to an image at any size.
 
 use crate::device::{self, DeviceArg};
-use crate::image_io::OutputFormat;
+use crate::image_io::{write_rows, OutputFormat};
 use crate::{io, read_gsi, Failure};
 use gsi::format::Limits;
+use gsi::render;
 use std::path::{Path, PathBuf};
 
 #[derive(clap::Args)]
@@ -114,9 +115,22 @@ fn decode_file(
     let (w, ht) = output_size(h.width, h.height, args)?;
     Limits::default().check_output(w, ht)?;
     let scene = f.records.to_scene();
+    let limits = Limits::default();
+    let named = |Failure(e)| Failure(format!("{}: {e}", output.display()));
+    if gpu.is_none() && format.takes_rows() {
+        // Rows written a window at a time as they are rendered: the image is never held
+        // whole (a 12 MP decode's 36 MB), nor are its pages faulted in.
+        return io::write_with(output, |out| -> Result<(), Failure> {
+            write_rows(format, out, (w, ht), &mut |sink| {
+                Ok(render::render_rgb8_rows(&scene, w, ht, &limits, sink)?)
+            })?;
+            Ok(())
+        })
+        .map_err(named);
+    }
     // On the CPU, tiles are blended a band at a time straight into the 8-bit output: 3
     // bytes per pixel in memory, not a float image and then an 8-bit copy.
-    let cpu = |scene: &gsi::Scene| gsi::render::render_rgb8(scene, w, ht, &Limits::default());
+    let cpu = |scene: &gsi::Scene| render::render_rgb8(scene, w, ht, &limits);
     let rgb = match gpu {
         None => cpu(&scene)?,
         Some(gpu) => match gpu.render(&scene, w, ht) {
@@ -132,7 +146,5 @@ fn decode_file(
             Err(e) => return Err(e.into()),
         },
     };
-    let parts = format.encode(&rgb, w, ht)?;
-    let parts: Vec<&[u8]> = parts.iter().map(|p| p.as_ref()).collect();
-    io::write_parts(output, &parts).map_err(|e| Failure(format!("{}: {e}", output.display())))
+    io::write_with(output, |out| format.write(out, &rgb, w, ht)).map_err(named)
 }

@@ -13,29 +13,30 @@ pub fn open_input(path: &Path) -> io::Result<Box<dyn Read>> {
     }
 }
 
-/// Write `bytes` to `path` (or standard output for `-`), as [`write_parts`] does.
+/// Write `bytes` to `path` (or standard output for `-`), as [`write_with`] does.
 pub fn write_output(path: &Path, bytes: &[u8]) -> io::Result<()> {
-    write_parts(path, &[bytes])
+    write_with(path, |out| out.write_all(bytes))
 }
 
-/// Write `parts`, one after the other, to `path` (or standard output for `-`).
+/// Write to `path` (or standard output for `-`) what `write` writes, as it writes it.
 ///
 /// A file is written to a temporary sibling, synced, then renamed over the target, so a
-/// failure at any point leaves whatever was at `path` untouched.
-pub fn write_parts(path: &Path, parts: &[&[u8]]) -> io::Result<()> {
+/// failure at any point (in `write` too) leaves whatever was at `path` untouched.
+pub fn write_with<E: From<io::Error>>(
+    path: &Path,
+    write: impl FnOnce(&mut dyn Write) -> Result<(), E>,
+) -> Result<(), E> {
     if path == Path::new("-") {
         let mut out = io::stdout().lock();
-        for part in parts {
-            out.write_all(part)?;
-        }
-        return out.flush();
+        write(&mut out)?;
+        return Ok(out.flush()?);
     }
     let tmp = temp_sibling(path);
     let result = (|| {
-        let mut f = File::create(&tmp)?;
-        for part in parts {
-            f.write_all(part)?;
-        }
+        // Buffered: encoders write in small pieces; large writes pass straight through.
+        let mut f = io::BufWriter::with_capacity(1 << 16, File::create(&tmp)?);
+        write(&mut f)?;
+        let f = f.into_inner().map_err(io::IntoInnerError::into_error)?;
         f.sync_all()?;
         drop(f);
         std::fs::rename(&tmp, path)?;

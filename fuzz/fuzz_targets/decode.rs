@@ -4,7 +4,8 @@
 //! values, and (for small enough scenes) the tiled renderer agrees bit for
 //! bit with a plain per-pixel loop written from `format-spec.md` §6.3-6.4. The 8-bit
 //! outputs rendered straight into a caller's buffer (RGB and RGBA, as `gsi::Reader` and
-//! `gsi decode` use them) equal the float image converted afterwards.
+//! `gsi decode` use them) or handed out a few rows at a time (as `gsi decode` writes a
+//! PPM) equal the float image converted afterwards.
 
 #![no_main]
 
@@ -51,6 +52,16 @@ fuzz_target!(|data: &[u8]| {
     assert!(
         direct == rgb8,
         "8-bit render differs from the float one converted"
+    );
+    let mut rows = Vec::with_capacity(rgb8.len());
+    gsi::render::render_rgb8_rows(&scene, width, height, &common::limits(), |r| {
+        rows.extend_from_slice(r);
+        Ok(())
+    })
+    .expect("8-bit render in rows");
+    assert!(
+        rows == rgb8,
+        "8-bit rows differ from the float render converted"
     );
     let mut rgba = vec![0u8; (width * height * 4) as usize];
     gsi::render::render_rgba8_into(&scene, width, height, &mut rgba).expect("RGBA render");

@@ -12,6 +12,7 @@ use super::project::{Projected, Rect};
 use super::tiles::{band_tiles, runs, Bins, Span};
 use super::TILE;
 use gsi_format::model::{Blend, ToneCurve, WeightRule};
+use std::sync::Mutex;
 
 /// Most entries of the per-band lists binned at once (64 MiB of indices).
 const BAND_BUDGET: u64 = 1 << 24;
@@ -98,68 +99,184 @@ pub fn render_projected<O: Output>(
     out: &mut [O::Elem],
     parallel: bool,
 ) {
-    let budgets = (BAND_BUDGET, TILE_BUDGET);
-    let how = (parallel, Kernel::detect(), budgets);
-    render_with::<O>(proj, blend, tone, (width, height), out, how);
+    let how = (parallel, Kernel::detect(), (BAND_BUDGET, TILE_BUDGET));
+    let whole = render_with::<O>(proj, blend, tone, (width, height), out, None, how);
+    debug_assert!(whole.is_ok(), "no sink, no error");
 }
 
-/// [`render_projected`] with the build of the inner loops and the binning budgets
-/// `(bands, tiles)` given, so that tests can force each build and many small runs.
+/// Where the rows of a render go when they are not left in one whole-image buffer.
+pub type Sink<'a, T> = &'a mut dyn FnMut(&[T]) -> std::io::Result<()>;
+
+/// [`render_projected`] a few bands at a time: `window` holds a whole number of bands
+/// (at least one) of `O`'s layout, and `sink` gets its rows, top to bottom, after each
+/// step; the first error from `sink` stops the render and is returned. Memory then
+/// follows the window, not the output: a 12 MP decode written as it is rendered never
+/// holds its 36 MB, nor faults their pages in.
+pub fn render_projected_rows<O: Output>(
+    proj: &[Projected],
+    blend: (Blend, WeightRule),
+    tone: Option<&ToneCurve>,
+    (width, height): (u32, u32),
+    window: &mut [O::Elem],
+    parallel: bool,
+    sink: Sink<'_, O::Elem>,
+) -> std::io::Result<()> {
+    let how = (parallel, Kernel::detect(), (BAND_BUDGET, TILE_BUDGET));
+    render_with::<O>(proj, blend, tone, (width, height), window, Some(sink), how)
+}
+
+/// [`render_projected`] (without `sink`, `out` the whole image) or
+/// [`render_projected_rows`] (with it, `out` the window), with the build of the inner
+/// loops and the binning budgets `(bands, tiles)` given, so that tests can force each
+/// build and many small runs.
 fn render_with<O: Output>(
     proj: &[Projected],
     blend: (Blend, WeightRule),
     tone: Option<&ToneCurve>,
     (width, height): (u32, u32),
     out: &mut [O::Elem],
+    mut sink: Option<Sink<'_, O::Elem>>,
     (parallel, kernel, (band_budget, tile_budget)): (bool, Kernel, (u64, u64)),
-) {
-    debug_assert_eq!(out.len(), width as usize * height as usize * O::PER_PIXEL);
+) -> std::io::Result<()> {
     let row_len = width as usize * O::PER_PIXEL;
     let band_len = TILE.min(height) as usize * row_len;
     let band_count = height.div_ceil(TILE);
+    // Bands per step: all of a run into the whole image, or a window's worth.
+    let per_step = match sink {
+        None => {
+            debug_assert_eq!(out.len(), height as usize * row_len);
+            band_count
+        }
+        Some(_) => {
+            assert!(out.len() >= band_len && out.len() % band_len == 0);
+            (out.len() / band_len) as u32
+        }
+    };
     let spans = proj
         .iter()
         .enumerate()
         .map(|(k, p)| (k as u32, p.bbox.y0 / TILE, p.bbox.y1 / TILE));
 
+    // Through a window, each thread keeps its scratch from step to step (into a whole
+    // image, one is made per run and thread).
+    let kept: Vec<Mutex<Scratch>> = match sink {
+        None => Vec::new(),
+        Some(_) => (0..threads(parallel)).map(|_| Mutex::default()).collect(),
+    };
     let mut bands = Bins::default();
     for run in runs(spans.clone(), band_count, band_budget) {
         bands.fill(spans.clone(), run.clone());
-        let start = run.start as usize * band_len;
-        let end = (run.end as usize * band_len).min(out.len());
-        let rows = &mut out[start..end];
-        let job = |scratch: &mut Scratch, (k, rows): (usize, &mut [O::Elem])| {
-            let band = run.start + k as u32;
-            let ctx = Band {
-                proj,
-                blend,
-                kernel,
-                width,
-                y0: band * TILE,
-                tile_budget,
+        let mut first = run.start;
+        while first < run.end {
+            let end = run.end.min(first.saturating_add(per_step));
+            let rows = (end * TILE).min(height) as usize - (first * TILE) as usize;
+            let step = match sink {
+                None => &mut out[first as usize * band_len..][..rows * row_len],
+                Some(_) => &mut out[..rows * row_len],
             };
-            let Scratch { tiles, band: rgb } = scratch;
-            O::band(rows, rgb, |px| {
-                ctx.render(bands.slot(band), px, tiles);
-                if let Some(t) = tone {
-                    t.apply(px);
-                }
-            });
-        };
-        #[cfg(feature = "parallel")]
-        if parallel {
-            use rayon::prelude::*;
-            rows.par_chunks_mut(band_len)
-                .enumerate()
-                .for_each_init(Scratch::default, job);
-            continue;
+            let ctx = (proj, blend, tone, width, kernel, tile_budget);
+            let kept = (!kept.is_empty()).then_some(&kept[..]);
+            render_bands::<O>(ctx, &bands, first, (step, band_len), kept, parallel);
+            if let Some(sink) = sink.as_mut() {
+                sink(step)?;
+            }
+            first = end;
         }
-        let _ = parallel;
-        let mut scratch = Scratch::default();
-        rows.chunks_mut(band_len)
-            .enumerate()
-            .for_each(|item| job(&mut scratch, item));
     }
+    Ok(())
+}
+
+/// What every band of a render shares: the Gaussians, how they blend, the tone curve,
+/// the output's width, the build of the inner loops and the tile lists' budget.
+type Shared<'a> = (
+    &'a [Projected],
+    (Blend, WeightRule),
+    Option<&'a ToneCurve>,
+    u32,
+    Kernel,
+    u64,
+);
+
+/// Render the bands from `first` on into `rows` (`band_len` values a band, the last
+/// one possibly shorter), their lists in `bands`, with the scratch of the thread's slot
+/// in `kept` where given (else one made per thread); on rayon's pool where `parallel`.
+fn render_bands<O: Output>(
+    (proj, blend, tone, width, kernel, tile_budget): Shared<'_>,
+    bands: &Bins,
+    first: u32,
+    (rows, band_len): (&mut [O::Elem], usize),
+    kept: Option<&[Mutex<Scratch>]>,
+    parallel: bool,
+) {
+    let job = |scratch: &mut Scratch, (k, rows): (usize, &mut [O::Elem])| {
+        let band = first + k as u32;
+        let ctx = Band {
+            proj,
+            blend,
+            kernel,
+            width,
+            y0: band * TILE,
+            tile_budget,
+        };
+        let Scratch { tiles, band: rgb } = scratch;
+        O::band(rows, rgb, |px| {
+            ctx.render(bands.slot(band), px, tiles);
+            if let Some(t) = tone {
+                t.apply(px);
+            }
+        });
+    };
+    // A slot per thread, so that no lock is ever waited for (a poisoned one only means
+    // another band panicked; its scratch is still only scratch).
+    let with_kept = |kept: &[Mutex<Scratch>], item| {
+        let slot = thread_slot() % kept.len();
+        let mut scratch = kept[slot].lock().unwrap_or_else(|e| e.into_inner());
+        job(&mut scratch, item)
+    };
+    #[cfg(feature = "parallel")]
+    if parallel {
+        use rayon::prelude::*;
+        let bands = rows.par_chunks_mut(band_len).enumerate();
+        match kept {
+            Some(kept) => bands.for_each(|item| with_kept(kept, item)),
+            None => bands.for_each_init(Scratch::default, job),
+        }
+        return;
+    }
+    let _ = parallel;
+    let mut own = Scratch::default();
+    for item in rows.chunks_mut(band_len).enumerate() {
+        match kept {
+            Some(kept) => with_kept(kept, item),
+            None => job(&mut own, item),
+        }
+    }
+}
+
+/// Threads that may render bands at once.
+fn threads(parallel: bool) -> usize {
+    #[cfg(feature = "parallel")]
+    if parallel {
+        return rayon::current_num_threads();
+    }
+    let _ = parallel;
+    1
+}
+
+/// This thread's index among [`threads`] (0 outside a pool).
+fn thread_slot() -> usize {
+    #[cfg(feature = "parallel")]
+    if let Some(k) = rayon::current_thread_index() {
+        return k;
+    }
+    0
+}
+
+/// Bands [`render_projected_rows`] takes a step at a time: two per thread, so that the
+/// threads share a step's uneven bands, and the window stays small (a 768-pixel-wide
+/// output on two threads: 64 rows, 144 KiB).
+pub fn window_bands(parallel: bool) -> usize {
+    (2 * threads(parallel)).min(32)
 }
 
 /// Per-thread buffers, reused from band to band.
@@ -308,7 +425,7 @@ mod tests {
         assert!(want.iter().any(|&x| x != 0.0));
         let mut got = vec![f32::NAN; want.len()];
         let how = (false, kernel, (BAND_BUDGET, TILE_BUDGET));
-        render_with::<RgbF32>(proj, blend, None, (w, h), &mut got, how);
+        render_with::<RgbF32>(proj, blend, None, (w, h), &mut got, None, how).unwrap();
         want.iter()
             .zip(&got)
             .position(|(a, b)| a.to_bits() != b.to_bits())
@@ -418,6 +535,56 @@ mod tests {
         }
     }
 
+    /// Rows handed out through windows of one band or several, with runs of one band
+    /// (the tiniest budgets) or of all, on one thread or the pool, are the whole image.
+    #[test]
+    fn windows_give_the_whole_image() {
+        for blend in [Blend::Sum, Blend::Alpha] {
+            let mut spec = SceneSpec::new(40, 40, 300, blend);
+            spec.sigma_px = (0.3, 40.0);
+            let scene = random_scene(6, spec);
+            let (w, h) = (45, 83);
+            let proj = project_scene(&scene, w, h);
+            let rule = (blend, WeightRule::Columns);
+            let mut whole = vec![0.0; (w * h * 3) as usize];
+            render_projected::<RgbF32>(&proj, rule, None, (w, h), &mut whole, false);
+            let band_len = (TILE * w * 3) as usize;
+            for budgets in [(BAND_BUDGET, TILE_BUDGET), (0, 0)] {
+                for bands in [1, 2, 5, 6] {
+                    for parallel in [false, true] {
+                        let mut window = vec![f32::NAN; bands * band_len];
+                        let mut rows = Vec::new();
+                        let how = (parallel, Kernel::detect(), budgets);
+                        let mut sink = |r: &[f32]| {
+                            rows.extend_from_slice(r);
+                            Ok(())
+                        };
+                        let size = (w, h);
+                        render_with::<RgbF32>(
+                            &proj,
+                            rule,
+                            None,
+                            size,
+                            &mut window,
+                            Some(&mut sink),
+                            how,
+                        )
+                        .unwrap();
+                        let same = rows.len() == whole.len()
+                            && rows
+                                .iter()
+                                .zip(&whole)
+                                .all(|(a, b)| a.to_bits() == b.to_bits());
+                        assert!(
+                            same,
+                            "{blend:?} {budgets:?} {bands} bands, parallel {parallel}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+
     #[test]
     fn tiny_budgets_give_the_same_image() {
         // Binning in runs of one band and one tile must not change what a pixel visits.
@@ -432,9 +599,11 @@ mod tests {
                 let mut b = a.clone();
                 let kernel = Kernel::detect();
                 let how = (false, kernel, (BAND_BUDGET, TILE_BUDGET));
-                render_with::<RgbF32>(&proj, (blend, rule), None, (w, h), &mut a, how);
+                render_with::<RgbF32>(&proj, (blend, rule), None, (w, h), &mut a, None, how)
+                    .unwrap();
                 let tiny = (false, kernel, (0, 0));
-                render_with::<RgbF32>(&proj, (blend, rule), None, (w, h), &mut b, tiny);
+                render_with::<RgbF32>(&proj, (blend, rule), None, (w, h), &mut b, None, tiny)
+                    .unwrap();
                 assert!(a.iter().any(|&x| x != 0.0));
                 assert!(
                     a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits()),

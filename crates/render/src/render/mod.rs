@@ -221,6 +221,60 @@ pub fn render_as<O: cpu::Output>(
             ),
         ));
     }
+    let projected = checked_projection(scene, width, height, limits)?;
+    let parallel = cfg!(feature = "parallel");
+    cpu::render_projected::<O>(
+        &projected,
+        (scene.blend, scene.weights),
+        scene.tone.as_ref(),
+        (width, height),
+        out,
+        parallel,
+    );
+    Ok(())
+}
+
+/// 8-bit RGB of `scene` at `width × height`, handed to `sink` in steps of whole rows, top
+/// to bottom (two bands of [`TILE`] rows a step per thread, at most 512 rows): the bytes [`render_rgb8`] gives, in memory that
+/// does not grow with the output, so that a decode written out as it is rendered (a PPM,
+/// a PNG stream) never holds the whole image. Refused over `limits` as
+/// [`render_rgb8`] is; the first error `sink` returns stops the render and comes back
+/// as an [`ErrorKind::Io`] error.
+pub fn render_rgb8_rows(
+    scene: &Scene,
+    width: u32,
+    height: u32,
+    limits: &Limits,
+    mut sink: impl FnMut(&[u8]) -> std::io::Result<()>,
+) -> Result<()> {
+    let row = buffer_len(width, 1, 3, &Limits::unlimited())?;
+    limits.check_output(width, height)?;
+    let parallel = cfg!(feature = "parallel");
+    let bands = cpu::window_bands(parallel).min(height.div_ceil(TILE) as usize);
+    let window_len = row * TILE.min(height) as usize * bands;
+    limits.check_alloc(window_len as u64, "the rows rendered at a time")?;
+    let projected = checked_projection(scene, width, height, limits)?;
+    let mut window = vec![0u8; window_len];
+    cpu::render_projected_rows::<cpu::Rgb8>(
+        &projected,
+        (scene.blend, scene.weights),
+        scene.tone.as_ref(),
+        (width, height),
+        &mut window,
+        parallel,
+        &mut sink,
+    )?;
+    Ok(())
+}
+
+/// The Gaussians of `scene` projected for a `width × height` output, after checking the
+/// scene and the render's work against `limits`.
+fn checked_projection(
+    scene: &Scene,
+    width: u32,
+    height: u32,
+    limits: &Limits,
+) -> Result<Vec<Projected>> {
     if !scene.gaussians.is_consistent() {
         return Err(Error::new(
             ErrorKind::InvalidValue,
@@ -236,17 +290,7 @@ pub fn render_as<O: cpu::Output>(
     }
     let projected = project_scene(scene, width, height);
     limits.check_render_work(render_work(&projected), width, height)?;
-    let parallel = cfg!(feature = "parallel");
-    let tone = scene.tone.as_ref();
-    cpu::render_projected::<O>(
-        &projected,
-        (scene.blend, scene.weights),
-        tone,
-        (width, height),
-        out,
-        parallel,
-    );
-    Ok(())
+    Ok(projected)
 }
 
 /// Number of values of a `width × height` buffer of `per_pixel` values, refusing empty
@@ -285,6 +329,62 @@ mod tests {
         for (c, want) in cases {
             assert_eq!(to_u8(c), want, "{c}");
         }
+    }
+
+    /// Rows handed out a window at a time are the bytes of the whole-image render, for
+    /// heights within one window, over several, and not a multiple of a band; a sink's
+    /// error ends the render and comes back.
+    #[test]
+    fn rows_in_windows_are_the_whole_image() {
+        use gsi_format::model::{Blend, WeightRule};
+        use gsi_synth::{random_scene, SceneSpec};
+        for blend in [Blend::Sum, Blend::Alpha] {
+            for rule in [WeightRule::PerPixel, WeightRule::Columns] {
+                let mut spec = SceneSpec::new(60, 90, 300, blend);
+                spec.sigma_px = (0.3, 30.0);
+                spec.weights = rule;
+                let scene = random_scene(7, spec);
+                for (w, h) in [(1, 1), (60, 90), (37, 300), (5, 129), (90, 16)] {
+                    let limits = Limits::default();
+                    let whole = render_rgb8(&scene, w, h, &limits).unwrap();
+                    let mut rows = Vec::new();
+                    let mut steps = 0;
+                    render_rgb8_rows(&scene, w, h, &limits, |step| {
+                        assert_eq!(step.len() % (w as usize * 3), 0);
+                        rows.extend_from_slice(step);
+                        steps += 1;
+                        Ok(())
+                    })
+                    .unwrap();
+                    assert!(whole.iter().any(|&v| v != 0));
+                    assert!(rows == whole, "{blend:?} {rule:?} {w}x{h}");
+                    let bands = cpu::window_bands(cfg!(feature = "parallel"));
+                    assert_eq!(steps, (h as usize).div_ceil(TILE as usize * bands));
+                }
+                let mut calls = 0;
+                let err = render_rgb8_rows(&scene, 40, 400, &Limits::default(), |_| {
+                    calls += 1;
+                    Err(std::io::Error::other("disk full"))
+                })
+                .unwrap_err();
+                assert_eq!((err.kind(), calls), (ErrorKind::Io, 1));
+            }
+        }
+    }
+
+    #[test]
+    fn rows_are_refused_over_the_limits() {
+        use gsi_format::model::Blend;
+        use gsi_synth::{random_scene, SceneSpec};
+        let scene = random_scene(1, SceneSpec::new(8, 8, 10, Blend::Sum));
+        let small = Limits {
+            max_output_pixels: 100,
+            ..Limits::default()
+        };
+        let err = render_rgb8_rows(&scene, 20, 20, &small, |_| Ok(())).unwrap_err();
+        assert_eq!(err.kind(), ErrorKind::LimitExceeded);
+        let err = render_rgb8_rows(&scene, 0, 20, &Limits::default(), |_| Ok(())).unwrap_err();
+        assert_eq!(err.kind(), ErrorKind::InvalidValue);
     }
 
     #[test]
