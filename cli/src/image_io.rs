@@ -120,7 +120,7 @@ mod tests {
         let step = 3 * w as usize * 3;
         let mut streamed = Vec::new();
         let wrote = write_rows(OutputFormat::Pnm, &mut streamed, (w, h), &mut |sink| {
-            Ok(rgb.chunks(step).try_for_each(|r| sink(r))?)
+            Ok(rgb.chunks(step).try_for_each(&mut *sink)?)
         });
         assert!(wrote.is_ok() && OutputFormat::Pnm.takes_rows());
         let mut whole = Vec::new();
