@@ -123,6 +123,12 @@ impl Sink for Meter {
     }
 }
 
+/// All ones where `b`, else 0.
+#[inline(always)]
+fn lanes_of(b: bool) -> u32 {
+    u32::from(b).wrapping_neg()
+}
+
 /// The range decoder over one payload's coded bytes.
 pub struct Decoder<'a> {
     data: &'a [u8],
@@ -175,9 +181,18 @@ impl<'a> Decoder<'a> {
         self.range = (bound & !ones) | (self.range.wrapping_sub(bound) & ones);
         let (up, down) = (p.0 + ((PROB_ONE - p.0) >> ADAPT), p.0 - (p.0 >> ADAPT));
         p.0 = if bit { down } else { up };
-        while self.range < TOP {
-            self.range <<= 8;
-            self.code = (self.code << 8) | u32::from(self.next()?);
+        // One byte at most: the range was at least 2^24 and keeps at least 31/4096 of
+        // itself (a probability stays within 31..=4065), so one shift restores 2^24. As
+        // selects rather than a branch, which went one way or the other as the data did.
+        let shift = self.range < TOP;
+        let byte = self.data.get(self.at).copied().unwrap_or(0);
+        let n = 8 * u32::from(shift);
+        self.range <<= n;
+        self.code = (self.code << n) | (u32::from(byte) & lanes_of(shift));
+        self.at += usize::from(shift);
+        debug_assert!(self.range >= TOP);
+        if self.at > self.data.len() {
+            return Err(corrupt("coded stream ends before its last code"));
         }
         Ok(bit)
     }
@@ -297,7 +312,8 @@ impl Tree {
         let top = bits.min(TREE_BITS);
         Tree {
             bits,
-            nodes: vec![Prob::default(); 1 << top],
+            // Nodes 1..2^top, and room for the last level's children (see `get`).
+            nodes: vec![Prob::default(); 2 << top],
             low: vec![Prob::default(); usize::from(bits - top)],
         }
     }
@@ -322,8 +338,16 @@ impl Tree {
     pub fn get(&mut self, d: &mut Decoder) -> Result<u32> {
         let (top, rest) = (self.top(), self.bits - self.top());
         let mut node = 1usize;
+        let mut p = self.nodes[1];
         for _ in 0..top {
-            node = 2 * node + usize::from(d.bit(&mut self.nodes[node])?);
+            // Both children's contexts are read while this node's decision is made, so
+            // that the next decision waits for a select, not a load. (The last level's
+            // children are the padding past the tree, never decided.)
+            let children = [self.nodes[2 * node], self.nodes[2 * node + 1]];
+            let bit = d.bit(&mut p)?;
+            self.nodes[node] = p;
+            node = 2 * node + usize::from(bit);
+            p = children[usize::from(bit)];
         }
         let mut q = (node - (1 << top)) as u32;
         for j in (0..rest).rev() {

@@ -224,10 +224,19 @@ pub fn decode(data: &[u8], count: usize, qs: &[Quantizer]) -> Result<Vec<u32>> {
             mode => {
                 let mut ctx = Signed::default();
                 let prior = &done[(k.max(1) - 1) * count..];
+                // The prediction across components depends on the prior code alone: a
+                // table of it where there are fewer codes than Gaussians.
+                let table = match mode {
+                    MODE_ACROSS => qs[k - 1].table(count, |c| across(&qs[k - 1], &q, c)),
+                    _ => None,
+                };
                 let mut prev = 0u32;
                 for i in 0..count {
                     let p = if mode == MODE_ACROSS {
-                        across(&qs[k - 1], &q, prior[i])
+                        match table.as_ref().and_then(|t| t.get(prior[i] as usize)) {
+                            Some(&p) => p,
+                            None => across(&qs[k - 1], &q, prior[i]),
+                        }
                     } else {
                         prev
                     };

@@ -95,6 +95,13 @@ impl Quantizer {
         (lo * (1.0 - t) + hi * t).clamp(lo, hi) as f32
     }
 
+    /// `f(code)` for every code, where there are fewer codes than half of `uses` (the
+    /// number of times the caller needs a value): a table is then cheaper than a division
+    /// for each. Else `None`.
+    pub fn table<T>(&self, uses: usize, f: impl Fn(u32) -> T) -> Option<Vec<T>> {
+        ((self.max_code() as usize) < uses / 2).then(|| (0..=self.max_code()).map(f).collect())
+    }
+
     /// Nearest code for `x`; values outside the range clamp to its ends, NaN maps to 0.
     #[inline]
     pub fn quantize(&self, x: f32) -> u32 {
@@ -152,6 +159,31 @@ pub fn unpack(data: &[u8], count: usize, quantizers: &[Quantizer]) -> Vec<u32> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Values looked up in a table are the values computed one by one, codes past the
+    /// largest included (an in-memory attribute may hold them; they clamp to `max`).
+    #[test]
+    fn tabled_values_are_the_computed_ones() {
+        use crate::format::records::Attribute;
+        let q = Quantizer {
+            bits: 5,
+            min: -3.7,
+            max: 1e3,
+        };
+        assert!(q.table(10, |c| c).is_none());
+        let table = q.table(100, |c| q.dequantize(c)).unwrap();
+        assert_eq!(table.len(), 32);
+        let codes: Vec<u32> = (0..100).map(|i| (i * 7) % 40).collect();
+        let a = Attribute {
+            quantizers: vec![q],
+            codes: codes.clone(),
+        };
+        let got: Vec<[f32; 1]> = a.values();
+        for (v, &c) in got.iter().zip(&codes) {
+            assert_eq!(v[0].to_bits(), q.dequantize(c).to_bits(), "code {c}");
+        }
+        assert_eq!(q.dequantize(39), q.max);
+    }
 
     #[test]
     fn pack_is_msb_first_and_planar() {

@@ -67,8 +67,23 @@ impl Attribute {
         let n = self.count();
         let mut out = vec![[0f32; C]; n];
         for (c, q) in self.quantizers.iter().enumerate() {
-            for (o, &code) in out.iter_mut().zip(&self.codes[c * n..(c + 1) * n]) {
-                o[c] = q.dequantize(code);
+            let plane = &self.codes[c * n..(c + 1) * n];
+            // Colour and covariance codes take a few hundred values at most: looked up,
+            // each is computed once rather than once per Gaussian (its f64 division).
+            match q.table(n, |code| q.dequantize(code)) {
+                Some(table) => {
+                    for (o, &code) in out.iter_mut().zip(plane) {
+                        o[c] = match table.get(code as usize) {
+                            Some(&v) => v,
+                            None => q.dequantize(code),
+                        };
+                    }
+                }
+                None => {
+                    for (o, &code) in out.iter_mut().zip(plane) {
+                        o[c] = q.dequantize(code);
+                    }
+                }
             }
         }
         out
