@@ -235,11 +235,24 @@ pub fn render_as<O: cpu::Output>(
 }
 
 /// 8-bit RGB of `scene` at `width × height`, handed to `sink` in steps of whole rows, top
-/// to bottom (two bands of [`TILE`] rows a step per thread, at most 512 rows): the bytes [`render_rgb8`] gives, in memory that
-/// does not grow with the output, so that a decode written out as it is rendered (a PPM,
-/// a PNG stream) never holds the whole image. Refused over `limits` as
-/// [`render_rgb8`] is; the first error `sink` returns stops the render and comes back
-/// as an [`ErrorKind::Io`] error.
+/// to bottom (two bands of [`TILE`] rows a step per thread, at most 512 rows): the bytes
+/// [`render_rgb8`] gives, in memory that does not grow with the output, so that a decode
+/// written out as it is rendered (a PPM, say) never holds the whole image. Refused over
+/// `limits` as [`render_rgb8`] is; the first error `sink` returns stops the render and
+/// comes back as an [`ErrorKind::Io`] error.
+///
+/// ```
+/// # use gsi_format::model::Blend;
+/// # let scene = gsi_synth::random_scene(1, gsi_synth::SceneSpec::new(64, 48, 50, Blend::Sum));
+/// // A binary PPM is its header and then its rows: write them as they come.
+/// let mut ppm = b"P6\n640 480\n255\n".to_vec();
+/// gsi_render::render::render_rgb8_rows(&scene, 640, 480, &Default::default(), |rows| {
+///     ppm.extend_from_slice(rows); // or `file.write_all(rows)`
+///     Ok(())
+/// })?;
+/// assert_eq!(ppm.len(), 15 + 640 * 480 * 3);
+/// # Ok::<(), gsi_format::format::Error>(())
+/// ```
 pub fn render_rgb8_rows(
     scene: &Scene,
     width: u32,
