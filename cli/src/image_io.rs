@@ -110,29 +110,6 @@ fn jpeg_reaches_its_end(b: &[u8]) -> bool {
 mod tests {
     use super::{jpeg_reaches_its_end, OutputFormat};
 
-    /// Rows written a few at a time make the PPM that the whole image makes; the formats
-    /// whose encoders want the whole image are refused before anything is written.
-    #[test]
-    fn rows_make_the_ppm_the_whole_image_makes() {
-        use super::write_rows;
-        let (w, h) = (7u32, 10u32);
-        let rgb: Vec<u8> = (0..w * h * 3).map(|i| (i * 37 % 251) as u8).collect();
-        let step = 3 * w as usize * 3;
-        let mut streamed = Vec::new();
-        let wrote = write_rows(OutputFormat::Pnm, &mut streamed, (w, h), &mut |sink| {
-            Ok(rgb.chunks(step).try_for_each(&mut *sink)?)
-        });
-        assert!(wrote.is_ok() && OutputFormat::Pnm.takes_rows());
-        let mut whole = Vec::new();
-        assert!(OutputFormat::Pnm.write(&mut whole, &rgb, w, h).is_ok());
-        assert_eq!(streamed, whole);
-        for format in [OutputFormat::Png, OutputFormat::Jpeg, OutputFormat::WebP] {
-            let mut out = Vec::new();
-            let refused = write_rows(format, &mut out, (w, h), &mut |_| unreachable!());
-            assert!(refused.is_err() && out.is_empty() && !format.takes_rows());
-        }
-    }
-
     #[test]
     fn a_ppm_is_its_header_and_the_pixels_themselves() {
         let rgb: Vec<u8> = (0..5 * 2 * 3).map(|i| i as u8).collect();
@@ -212,11 +189,6 @@ impl OutputFormat {
         OutputFormat::of(Path::new(&format!("x.{name}")))
     }
 
-    /// Whether [`write_rows`] writes this format from rows as they come.
-    pub fn takes_rows(self) -> bool {
-        self == OutputFormat::Pnm
-    }
-
     /// Write `rgb` (8-bit RGB, `w`×`h`) to `out` in this format.
     pub fn write(self, out: &mut dyn Write, rgb: &[u8], w: u32, h: u32) -> Result<(), Failure> {
         use image::ImageEncoder;
@@ -243,36 +215,6 @@ impl OutputFormat {
         }
         Ok(())
     }
-}
-
-/// Where [`write_rows`] takes an image's rows from: a function that hands them, top to
-/// bottom, a few at a time, to the sink it is given.
-pub type Rows<'f> =
-    &'f mut dyn FnMut(&mut dyn FnMut(&[u8]) -> std::io::Result<()>) -> Result<(), Failure>;
-
-/// Write a `w`×`h` image in `format` to `out` from its 8-bit RGB rows as `rows` hands
-/// them over, so that the image is never held whole. Refused, with nothing written, for
-/// a format whose encoder wants the whole image ([`OutputFormat::takes_rows`]): PNG
-/// too, whose streaming writer (the `png` crate's, at the `image` crate's settings)
-/// measured 4–10 % slower than the whole-image encoder.
-pub fn write_rows(
-    format: OutputFormat,
-    out: &mut dyn Write,
-    (w, h): (u32, u32),
-    rows: Rows<'_>,
-) -> Result<(), Failure> {
-    match format {
-        OutputFormat::Pnm => {
-            out.write_all(&ppm_header(w, h))?;
-            rows(&mut |r| out.write_all(r))?;
-        }
-        OutputFormat::Png | OutputFormat::Jpeg | OutputFormat::WebP => {
-            return Err(Failure(format!(
-                "{format:?} is written from the whole image"
-            )))
-        }
-    }
-    Ok(())
 }
 
 /// The header of a binary PPM (P6) of `w`×`h` 8-bit RGB pixels: its pixel rows follow

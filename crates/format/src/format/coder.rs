@@ -123,9 +123,9 @@ impl Sink for Meter {
     }
 }
 
-/// All ones where `b`, else 0.
+/// All ones where `b`, else 0: a mask for selecting bits without a branch.
 #[inline(always)]
-fn lanes_of(b: bool) -> u32 {
+fn all_ones(b: bool) -> u32 {
     u32::from(b).wrapping_neg()
 }
 
@@ -176,7 +176,7 @@ impl<'a> Decoder<'a> {
         // Without branches: the decision is as unpredictable as the data, and a
         // mispredicted branch per decision cost more than the arithmetic (a third of the
         // decode time on a fitted Kodak file).
-        let ones = 0u32.wrapping_sub(u32::from(bit));
+        let ones = all_ones(bit);
         self.code -= bound & ones;
         self.range = (bound & !ones) | (self.range.wrapping_sub(bound) & ones);
         let (up, down) = (p.0 + ((PROB_ONE - p.0) >> ADAPT), p.0 - (p.0 >> ADAPT));
@@ -188,7 +188,7 @@ impl<'a> Decoder<'a> {
         let byte = self.data.get(self.at).copied().unwrap_or(0);
         let n = 8 * u32::from(shift);
         self.range <<= n;
-        self.code = (self.code << n) | (u32::from(byte) & lanes_of(shift));
+        self.code = (self.code << n) | (u32::from(byte) & all_ones(shift));
         self.at += usize::from(shift);
         debug_assert!(self.range >= TOP);
         if self.at > self.data.len() {

@@ -70,20 +70,12 @@ impl Attribute {
             let plane = &self.codes[c * n..(c + 1) * n];
             // Colour and covariance codes take a few hundred values at most: looked up,
             // each is computed once rather than once per Gaussian (its f64 division).
-            match q.table(n, |code| q.dequantize(code)) {
-                Some(table) => {
-                    for (o, &code) in out.iter_mut().zip(plane) {
-                        o[c] = match table.get(code as usize) {
-                            Some(&v) => v,
-                            None => q.dequantize(code),
-                        };
-                    }
-                }
-                None => {
-                    for (o, &code) in out.iter_mut().zip(plane) {
-                        o[c] = q.dequantize(code);
-                    }
-                }
+            let table = q.table(n, |code| q.dequantize(code));
+            for (o, &code) in out.iter_mut().zip(plane) {
+                o[c] = match table.as_ref().and_then(|t| t.get(code as usize)) {
+                    Some(&v) => v,
+                    None => q.dequantize(code),
+                };
             }
         }
         out

@@ -458,7 +458,9 @@ fn column_rows<const N: usize, const CAP: bool>(
         if g.carried_throughout() {
             // Every lane of the box started on this row and none can fall below the dark
             // level anywhere in the box: the rows left are carried, without the test
-            // (a tenth of the loop's time where it ran on every row).
+            // (a tenth of the loop's time where it ran on every row). A loop of its own:
+            // as a flag or'd into the loop above's test, the render measured 8–10 %
+            // slower than this (single thread, kodim23, kodim13, a random scene).
             debug_assert!(all_carried(&w));
             while j < f.ys.end {
                 for l in 0..N {

@@ -197,30 +197,46 @@ impl Projected {
     }
 }
 
+/// A bound on the power's terms `A·dx²`, `C·dy²` and `2·B·dx·dy` for offsets of at most
+/// `mx` and `my` from the centre: what the rounding of the power scales with.
+pub(crate) fn term_bound([a, b, c]: [f64; 3], mx: f64, my: f64) -> f64 {
+    a.abs() * mx * mx + c.abs() * my * my + 2.0 * b.abs() * mx * my
+}
+
+/// How far, in its logarithm, a weight is from `e^power` where the power's terms are
+/// bounded by `s` ([`term_bound`]). A pixel's binary32 power is off by less than 1e-6·s;
+/// a weight of the column rule (spec §6.3.2) by less than 31 such errors (its first power,
+/// and 15 times a step, whose terms are bounded as the power's) and 2e-5 (the rounding of
+/// up to 30 products and of `E(−C)` raised to up to the 105th power).
+pub(crate) fn log_weight_error(s: f64) -> f64 {
+    31e-6 * s + 2e-5
+}
+
 /// [`Projected::carried_throughout`] for a Gaussian centred at `mean` with `conic`, over
 /// the pixels of `bbox`. The power is concave, so its least value over the box is at a
-/// corner pixel; a carried weight is off from `e^power` by less than 31·1e-6·s + 2e-5 in
-/// its logarithm, `s` bounding the magnitude of the power's terms (see `tiles::reach`).
-/// Asking for a least power of −50 (the start level is −55, the dark level −55.45) with
-/// that error under 1 leaves a margin of over 4.
-fn carried_in(mean: [f32; 2], [a, b, c]: [f32; 3], bbox: &PixelBox) -> bool {
+/// corner pixel. Asking for a least power of −50 (the start level is −55, the dark level
+/// −55.45) with [`log_weight_error`] under 1 leaves a margin of over 4.
+fn carried_in(mean: [f32; 2], conic: [f32; 3], bbox: &PixelBox) -> bool {
     let dxs = [offset(bbox.x0, mean[0]), offset(bbox.x1, mean[0])].map(f64::from);
     let dys = [offset(bbox.y0, mean[1]), offset(bbox.y1, mean[1])].map(f64::from);
-    let [a, b, c] = [a, b, c].map(f64::from);
-    let (mut least, mut terms) = (f64::INFINITY, 0f64);
+    let [a, b, c] = conic.map(f64::from);
+    let mut least = f64::INFINITY;
     for dx in dxs {
         for dy in dys {
             least = least.min(-0.5 * (a * dx * dx + c * dy * dy) - b * dx * dy);
-            terms = terms.max(a.abs() * dx * dx + c.abs() * dy * dy + 2.0 * (b * dx * dy).abs());
         }
     }
+    let (mx, my) = (
+        dxs[0].abs().max(dxs[1].abs()),
+        dys[0].abs().max(dys[1].abs()),
+    );
     // (`min` and `max` pass over a NaN: a non-finite offset or conic is refused here.)
     let finite = dxs
         .iter()
         .chain(&dys)
         .chain(&[a, b, c])
         .all(|x| x.is_finite());
-    finite && least > -50.0 && 31e-6 * terms + 2e-5 < 1.0
+    finite && least > -50.0 && log_weight_error(term_bound([a, b, c], mx, my)) < 1.0
 }
 
 /// [`Projected::cutoff`] for an opacity.

@@ -16,7 +16,7 @@
 //! therefore binned in consecutive [`runs`] whose lists hold at most a budget of entries
 //! (a run has at least one slot; a single list never exceeds the number of Gaussians).
 
-use super::project::{offset, Projected};
+use super::project::{offset, term_bound, Projected};
 use super::TILE;
 use std::ops::Range;
 
@@ -58,12 +58,10 @@ pub fn bin<I, S>(
 }
 
 /// The largest `Q = -2·power` (exactly) at which a pixel may still reach the cut-off
-/// `cut`, where `s` bounds the magnitude of `Q`'s terms. A pixel's binary32 `power` is
-/// off by less than 1e-6·s; a weight of the column rule (spec §6.3.2) is off from
-/// `e^power` by less than 31 such errors in its logarithm (its first power, and 15 times
-/// a step, whose terms are bounded as the power's) and 2e-5 (the rounding of up to 30
-/// products and of `E(−C)` raised to up to the 105th power). So a margin of 1e-4·s + 1e-3 in `Q` leaves out no
-/// pixel that reaches the cut by either rule.
+/// `cut`, where `s` bounds the magnitude of `Q`'s terms ([`term_bound`]). A margin of
+/// 1e-4·s + 1e-3 in `Q`, over twice [`log_weight_error`](super::project::log_weight_error)
+/// (which covers a pixel's power by the rule of §6.3 too), leaves out no pixel that
+/// reaches the cut by either rule.
 fn reach(cut: f32, s: f64) -> f64 {
     -2.0 * f64::from(cut) + 1e-3 + 1e-4 * s
 }
@@ -99,10 +97,7 @@ pub fn band_tiles(g: &Projected, rows: Range<u32>) -> Option<(u32, u32)> {
         dxs[0].abs().max(dxs[1].abs()),
         dys[0].abs().max(dys[1].abs()),
     );
-    let t = reach(
-        g.cutoff(),
-        a.abs() * mx * mx + c.abs() * my * my + 2.0 * bb.abs() * mx * my,
-    );
+    let t = reach(g.cutoff(), term_bound([a, bb, c], mx, my));
     let det = a * c - bb * bb;
     if !(det > 0.0 && a > 0.0 && c > 0.0 && t.is_finite()) {
         return whole;
