@@ -7,7 +7,7 @@
 //! and evaluates only the pixels inside both the tile and the Gaussian's box. Which thread renders a band never changes the arithmetic, so the
 //! parallel and sequential builds give identical bits.
 
-use super::lanes::{Acc, Kernel};
+use super::lanes::{Acc, Kernel, TILE_W};
 use super::project::{Projected, Rect};
 use super::tiles::{band_tiles, runs, Bins, Span};
 use super::TILE;
@@ -18,18 +18,20 @@ use std::sync::Mutex;
 const BAND_BUDGET: u64 = 1 << 24;
 /// Most entries of one band's per-tile lists binned at once, per thread (4 MiB).
 const TILE_BUDGET: u64 = 1 << 20;
-/// What the renderer writes a band of pixels into. Blending happens in `f32` RGB; an
-/// output of another layout gets each band converted from a per-thread scratch band, so
-/// that a whole-image `f32` copy is never made.
+/// What the renderer writes a band of pixels into. Blending happens tile by tile in an
+/// `f32` [`Acc`]; each finished tile is stored straight into the output's layout, so that
+/// no `f32` copy of a band (nor of the image) is made for an 8-bit output, and no band is
+/// cleared, interleaved and converted in passes of its own.
 pub trait Output: Sync {
     type Elem: Copy + Send + Sync;
     /// Elements per pixel.
     const PER_PIXEL: usize;
-    /// Have `draw` blend a band into `f32` RGB (zeroed by `draw`), stored into `out`.
-    fn band(out: &mut [Self::Elem], scratch: &mut Vec<f32>, draw: impl FnOnce(&mut [f32]));
+    /// Store the pixels of `rect` (rows from the band's first) from `acc` into `band`, a
+    /// band of rows `width` pixels wide.
+    fn store(acc: &Acc, band: &mut [Self::Elem], width: u32, rect: Rect);
 }
 
-/// `f32` RGB, blended in place.
+/// `f32` RGB.
 pub struct RgbF32;
 /// 8-bit RGB by [`super::to_u8`].
 pub struct Rgb8;
@@ -38,29 +40,55 @@ pub struct Rgba8;
 /// `f32` RGB as native-endian bytes (12 per pixel), for byte buffers such as `image`'s.
 pub struct RgbF32Bytes;
 
-impl Output for RgbF32 {
-    type Elem = f32;
-    const PER_PIXEL: usize = 3;
-    fn band(out: &mut [f32], _: &mut Vec<f32>, draw: impl FnOnce(&mut [f32])) {
-        draw(out)
+/// Hand each pixel of `rect` in `acc` to `put`, with the `per_pixel` elements of `band`
+/// (rows `width` pixels wide) that it goes to.
+#[inline(always)]
+fn each_pixel<E, const P: usize>(
+    acc: &Acc,
+    band: &mut [E],
+    width: u32,
+    rect: Rect,
+    put: impl Fn(&mut [E; P], usize, [&[f32]; 3]),
+) {
+    let n = (rect.x1 - rect.x0) as usize;
+    for j in 0..(rect.y1 - rect.y0) as usize {
+        let at = (j * width as usize + rect.x0 as usize) * P;
+        let row = acc.row(j);
+        for (k, px) in band[at..at + n * P].chunks_exact_mut(P).enumerate() {
+            put(px.try_into().expect("P elements"), k, row);
+        }
     }
 }
 
-/// Blend a band of `pixels` pixels into `scratch` and hand it to `store`. (`draw` zeroes
-/// what it blends into, so the scratch is only sized here, not cleared.)
-fn via_scratch(scratch: &mut Vec<f32>, pixels: usize, draw: impl FnOnce(&mut [f32])) -> &[f32] {
-    scratch.resize(pixels * 3, 0.0);
-    draw(scratch);
-    scratch
+impl Output for RgbF32 {
+    type Elem = f32;
+    const PER_PIXEL: usize = 3;
+    #[inline(always)]
+    fn store(acc: &Acc, band: &mut [f32], width: u32, rect: Rect) {
+        each_pixel::<_, 3>(acc, band, width, rect, |px, k, [r, g, b]| {
+            *px = [r[k], g[k], b[k]];
+        });
+    }
 }
 
 impl Output for Rgb8 {
     type Elem = u8;
     const PER_PIXEL: usize = 3;
-    fn band(out: &mut [u8], scratch: &mut Vec<f32>, draw: impl FnOnce(&mut [f32])) {
-        let rgb = via_scratch(scratch, out.len() / 3, draw);
-        for (o, &c) in out.iter_mut().zip(rgb) {
-            *o = super::to_u8(c);
+    #[inline(always)]
+    fn store(acc: &Acc, band: &mut [u8], width: u32, rect: Rect) {
+        let n = (rect.x1 - rect.x0) as usize;
+        for j in 0..(rect.y1 - rect.y0) as usize {
+            // A tile row interleaved in `f32`, then converted as one run of values, which
+            // both vectorize (bytes interleaved one at a time did not).
+            let mut rgb = [0f32; 3 * TILE_W];
+            let [r, g, b] = acc.row(j);
+            for (k, px) in rgb.chunks_exact_mut(3).enumerate() {
+                px.copy_from_slice(&[r[k], g[k], b[k]]);
+            }
+            let at = (j * width as usize + rect.x0 as usize) * 3;
+            for (o, &v) in band[at..at + n * 3].iter_mut().zip(&rgb) {
+                *o = super::to_u8(v);
+            }
         }
     }
 }
@@ -68,24 +96,43 @@ impl Output for Rgb8 {
 impl Output for Rgba8 {
     type Elem = u8;
     const PER_PIXEL: usize = 4;
-    fn band(out: &mut [u8], scratch: &mut Vec<f32>, draw: impl FnOnce(&mut [f32])) {
-        let rgb = via_scratch(scratch, out.len() / 4, draw);
-        for (o, c) in out.chunks_exact_mut(4).zip(rgb.chunks_exact(3)) {
-            o[..3].copy_from_slice(&[super::to_u8(c[0]), super::to_u8(c[1]), super::to_u8(c[2])]);
-            o[3] = 255;
-        }
+    #[inline(always)]
+    fn store(acc: &Acc, band: &mut [u8], width: u32, rect: Rect) {
+        let to_u8 = super::to_u8;
+        each_pixel::<_, 4>(acc, band, width, rect, |px, k, [r, g, b]| {
+            *px = [to_u8(r[k]), to_u8(g[k]), to_u8(b[k]), 255];
+        });
     }
 }
 
 impl Output for RgbF32Bytes {
     type Elem = u8;
     const PER_PIXEL: usize = 12;
-    fn band(out: &mut [u8], scratch: &mut Vec<f32>, draw: impl FnOnce(&mut [f32])) {
-        let rgb = via_scratch(scratch, out.len() / 12, draw);
-        for (o, c) in out.chunks_exact_mut(4).zip(rgb) {
-            o.copy_from_slice(&c.to_ne_bytes());
-        }
+    #[inline(always)]
+    fn store(acc: &Acc, band: &mut [u8], width: u32, rect: Rect) {
+        each_pixel::<_, 12>(acc, band, width, rect, |px, k, [r, g, b]| {
+            for (o, c) in px.chunks_exact_mut(4).zip([r[k], g[k], b[k]]) {
+                o.copy_from_slice(&c.to_ne_bytes());
+            }
+        });
     }
+}
+
+/// [`Output::store`], built for the CPU features of `kernel`.
+#[inline(always)]
+fn store<O: Output>(kernel: Kernel, acc: &Acc, band: &mut [O::Elem], width: u32, rect: Rect) {
+    match kernel {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: `Avx2` and `Avx512` are only made where the CPU has AVX2.
+        Kernel::Avx2 | Kernel::Avx512 => unsafe { store_avx2::<O>(acc, band, width, rect) },
+        _ => O::store(acc, band, width, rect),
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn store_avx2<O: Output>(acc: &Acc, band: &mut [O::Elem], width: u32, rect: Rect) {
+    O::store(acc, band, width, rect)
 }
 
 /// Render projected Gaussians (in stored order) into `out`, `width * height` pixels of
@@ -159,7 +206,7 @@ fn render_with<O: Output>(
 
     // Through a window, each thread keeps its scratch from step to step (into a whole
     // image, one is made per run and thread).
-    let kept: Vec<Mutex<Scratch>> = match sink {
+    let kept: Vec<Mutex<Bins>> = match sink {
         None => Vec::new(),
         Some(_) => (0..threads(parallel)).map(|_| Mutex::default()).collect(),
     };
@@ -205,33 +252,28 @@ fn render_bands<O: Output>(
     bands: &Bins,
     first: u32,
     (rows, band_len): (&mut [O::Elem], usize),
-    kept: Option<&[Mutex<Scratch>]>,
+    kept: Option<&[Mutex<Bins>]>,
     parallel: bool,
 ) {
-    let job = |scratch: &mut Scratch, (k, rows): (usize, &mut [O::Elem])| {
+    let job = |tiles: &mut Bins, (k, rows): (usize, &mut [O::Elem])| {
         let band = first + k as u32;
         let ctx = Band {
             proj,
             blend,
+            tone,
             kernel,
             width,
             y0: band * TILE,
             tile_budget,
         };
-        let Scratch { tiles, band: rgb } = scratch;
-        O::band(rows, rgb, |px| {
-            ctx.render(bands.slot(band), px, tiles);
-            if let Some(t) = tone {
-                t.apply(px);
-            }
-        });
+        ctx.render::<O>(bands.slot(band), rows, tiles);
     };
     // A slot per thread, so that no lock is ever waited for (a poisoned one only means
     // another band panicked; its scratch is still only scratch).
-    let with_kept = |kept: &[Mutex<Scratch>], item| {
+    let with_kept = |kept: &[Mutex<Bins>], item| {
         let slot = thread_slot() % kept.len();
-        let mut scratch = kept[slot].lock().unwrap_or_else(|e| e.into_inner());
-        job(&mut scratch, item)
+        let mut tiles = kept[slot].lock().unwrap_or_else(|e| e.into_inner());
+        job(&mut tiles, item)
     };
     #[cfg(feature = "parallel")]
     if parallel {
@@ -239,12 +281,12 @@ fn render_bands<O: Output>(
         let bands = rows.par_chunks_mut(band_len).enumerate();
         match kept {
             Some(kept) => bands.for_each(|item| with_kept(kept, item)),
-            None => bands.for_each_init(Scratch::default, job),
+            None => bands.for_each_init(Bins::default, job),
         }
         return;
     }
     let _ = parallel;
-    let mut own = Scratch::default();
+    let mut own = Bins::default();
     for item in rows.chunks_mut(band_len).enumerate() {
         match kept {
             Some(kept) => with_kept(kept, item),
@@ -279,18 +321,11 @@ pub fn window_bands(parallel: bool) -> usize {
     (2 * threads(parallel)).min(32)
 }
 
-/// Per-thread buffers, reused from band to band.
-#[derive(Default)]
-struct Scratch {
-    tiles: Bins,
-    /// One band in `f32` RGB, for outputs not blended in place.
-    band: Vec<f32>,
-}
-
 /// What every tile of one band needs to know.
 struct Band<'a> {
     proj: &'a [Projected],
     blend: (Blend, WeightRule),
+    tone: Option<&'a ToneCurve>,
     kernel: Kernel,
     width: u32,
     /// First pixel row of the band.
@@ -300,13 +335,9 @@ struct Band<'a> {
 
 impl Band<'_> {
     /// Render the Gaussians of `list` (indices into `proj`, stored order) into `rows`,
-    /// the band's pixel rows.
-    fn render(&self, list: &[u32], rows: &mut [f32], tiles: &mut Bins) {
-        rows.fill(0.0);
-        if list.is_empty() {
-            return;
-        }
-        let row_len = self.width as usize * 3;
+    /// the band's pixel rows in `O`'s layout, binned to tiles in `tiles`.
+    fn render<O: Output>(&self, list: &[u32], rows: &mut [O::Elem], tiles: &mut Bins) {
+        let row_len = self.width as usize * O::PER_PIXEL;
         let y1 = self.y0 + (rows.len() / row_len) as u32;
         let tiles_x = self.width.div_ceil(TILE);
         let spans: Vec<Span> = list
@@ -321,10 +352,6 @@ impl Band<'_> {
         for run in runs(spans.clone(), tiles_x, self.tile_budget) {
             tiles.fill(spans.clone(), run.clone());
             for tx in run {
-                let tile = tiles.slot(tx);
-                if tile.is_empty() {
-                    continue;
-                }
                 let x0 = tx * TILE;
                 let rect = Rect {
                     x0,
@@ -332,10 +359,18 @@ impl Band<'_> {
                     y0: self.y0,
                     y1,
                 };
-                acc.0.iter_mut().for_each(|p| p.fill(0.0));
-                self.kernel
-                    .tile(self.blend, tile, self.proj, rect, &mut acc);
-                acc.scatter(rows, self.width, rect);
+                // Every tile is stored, an empty one as blended from nothing (through
+                // the tone curve, which need not take 0 to 0).
+                acc.clear();
+                let tile = tiles.slot(tx);
+                if !tile.is_empty() {
+                    self.kernel
+                        .tile(self.blend, tile, self.proj, rect, &mut acc);
+                }
+                if let Some(t) = self.tone {
+                    acc.tone(t, rect);
+                }
+                store::<O>(self.kernel, &acc, rows, self.width, rect);
             }
         }
     }

@@ -38,11 +38,11 @@ pub use gsi_format::contract::mla;
 use gsi_format::contract::{
     exp, ALPHA_MAX, ALPHA_MIN, COLUMN_DARK, COLUMN_START, COLUMN_STEEP, TRANSMITTANCE_MIN,
 };
-use gsi_format::model::{Blend, WeightRule};
+use gsi_format::model::{Blend, ToneCurve, WeightRule};
 
 /// Pixels per chunk: one AVX register of `f32`, two SSE or NEON ones.
 pub const LANES: usize = 8;
-const TILE_W: usize = TILE as usize;
+pub(crate) const TILE_W: usize = TILE as usize;
 
 /// One value per lane.
 pub type V = [f32; LANES];
@@ -286,16 +286,29 @@ impl Acc {
         Acc([[0.0; ACC_W * TILE_W]; 3])
     }
 
-    /// Write the tile into `rows`, the interleaved RGB pixel rows of an image `width`
-    /// pixels wide from row `rect.y0` on.
-    pub fn scatter(&self, rows: &mut [f32], width: u32, rect: Rect) {
+    /// Back to zeros, for the next tile.
+    #[inline]
+    pub fn clear(&mut self) {
+        self.0.iter_mut().for_each(|p| p.fill(0.0));
+    }
+
+    /// Row `j` of the three planes: the tile's [`TILE`] columns.
+    #[inline(always)]
+    pub fn row(&self, j: usize) -> [&[f32]; 3] {
+        let at = j * ACC_W;
+        let [r, g, b] = &self.0;
+        [&r[at..at + TILE_W], &g[at..at + TILE_W], &b[at..at + TILE_W]]
+    }
+
+    /// Every blended value of the tile `rect` through the tone curve `t` (spec §6.6),
+    /// channel by channel.
+    pub fn tone(&mut self, t: &ToneCurve, rect: Rect) {
         let n = (rect.x1 - rect.x0) as usize;
-        for j in rect.y0..rect.y1 {
-            let at = ((j - rect.y0) as usize * width as usize + rect.x0 as usize) * 3;
-            let l0 = (j - rect.y0) as usize * ACC_W;
-            let [r, g, b] = [&self.0[0], &self.0[1], &self.0[2]].map(|p| &p[l0..l0 + n]);
-            for (k, px) in rows[at..at + n * 3].chunks_exact_mut(3).enumerate() {
-                px.copy_from_slice(&[r[k], g[k], b[k]]);
+        for (channel, plane) in self.0.iter_mut().enumerate() {
+            for j in 0..(rect.y1 - rect.y0) as usize {
+                for v in &mut plane[j * ACC_W..][..n] {
+                    *v = t.eval(channel, *v);
+                }
             }
         }
     }
@@ -400,7 +413,15 @@ fn column_rows<const N: usize, const CAP: bool>(
     // kept in arrays of booleans, which LLVM packs to bytes and back, splitting the
     // lanes of `w` and `r` across registers.)
     let carried = |w: f32, m: f32| (w >= COLUMN_DARK) | (m == 0.0);
-    let all_carried = |w: &[f32; N]| (0..N).fold(true, |all, l| all & carried(w[l], mask[l]));
+    // (Plain loops, not `Iterator::fold`: LLVM left the sixteen-lane fold out of line,
+    // a call compiled without AVX on every row that starts a lane.)
+    let all_carried = |w: &[f32; N]| {
+        let mut all = true;
+        for l in 0..N {
+            all &= carried(w[l], mask[l]);
+        }
+        all
+    };
     let alphas = |w: &[f32; N]| {
         // `mask` is 1 or 0: `a·1` is `a`. Every chunk-row is blended, lit or not: adding
         // 0 changes no sum and multiplies no transmittance, and a branch on "lit"
@@ -436,9 +457,10 @@ fn column_rows<const N: usize, const CAP: bool>(
             rn[l] = r[l] * k;
         }
         let (power, dxs) = f.powers_n::<false, N>(start, dy(j));
-        let any = (0..N).fold(false, |any, l| {
-            any | (!carried(w[l], mask[l]) & (power[l] >= COLUMN_START))
-        });
+        let mut any = false;
+        for l in 0..N {
+            any |= !carried(w[l], mask[l]) & (power[l] >= COLUMN_START);
+        }
         let (w1, r1) = if any {
             f.column_start(&power, &dxs, dy(j), dy(j + 1))
         } else {
