@@ -48,7 +48,7 @@ fn each_pixel<E, const P: usize>(
     band: &mut [E],
     width: u32,
     rect: Rect,
-    put: impl Fn(&mut [E; P], usize, [&[f32]; 3]),
+    put: impl Fn(&mut [E; P], usize, [&[f32; TILE_W]; 3]),
 ) {
     let n = (rect.x1 - rect.x0) as usize;
     for j in 0..(rect.y1 - rect.y0) as usize {
@@ -77,17 +77,78 @@ impl Output for Rgb8 {
     #[inline(always)]
     fn store(acc: &Acc, band: &mut [u8], width: u32, rect: Rect) {
         let n = (rect.x1 - rect.x0) as usize;
+        #[cfg(target_arch = "x86_64")]
+        let ssse3 = std::is_x86_feature_detected!("ssse3");
         for j in 0..(rect.y1 - rect.y0) as usize {
-            // A tile row interleaved in `f32`, then converted as one run of values, which
-            // both vectorize (bytes interleaved one at a time did not).
-            let mut rgb = [0f32; 3 * TILE_W];
-            let [r, g, b] = acc.row(j);
-            for (k, px) in rgb.chunks_exact_mut(3).enumerate() {
-                px.copy_from_slice(&[r[k], g[k], b[k]]);
-            }
+            let row = acc.row(j);
             let at = (j * width as usize + rect.x0 as usize) * 3;
-            for (o, &v) in band[at..at + n * 3].iter_mut().zip(&rgb) {
-                *o = super::to_u8(v);
+            let out = &mut band[at..at + n * 3];
+            #[cfg(target_arch = "x86_64")]
+            if let (true, Ok(out)) = (ssse3, <&mut [u8; 3 * TILE_W]>::try_from(&mut *out)) {
+                // SAFETY: the CPU has SSSE3 (checked above).
+                unsafe { x86::rgb8_row(row, out) };
+                continue;
+            }
+            for (k, px) in out.chunks_exact_mut(3).enumerate() {
+                px.copy_from_slice(&row.map(|p| super::to_u8(p[k])));
+            }
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+mod x86 {
+    use super::TILE_W;
+    use std::arch::x86_64::*;
+
+    /// For output byte `p` of 16-byte block `b` of an interleaved RGB row of [`TILE_W`]
+    /// pixels, the byte of plane `c` it takes: `[b][c][p]`, −128 (a zero) where it takes
+    /// another plane's.
+    const INTERLEAVE: [[[i8; 16]; 3]; 3] = {
+        let mut m = [[[-128i8; 16]; 3]; 3];
+        let mut i = 0;
+        while i < 3 * TILE_W {
+            m[i / 16][i % 3][i % 16] = (i / 3) as i8;
+            i += 1;
+        }
+        m
+    };
+
+    /// A full tile row of the three planes as 8-bit RGB: [`super::super::to_u8`]'s
+    /// operations (max with 0 first, so that NaN gives 0; min with 1; ×255; +0.5;
+    /// truncation), four values at a time, then the planes interleaved by byte
+    /// shuffles. (Left to the compiler, the conversion or the interleaving came out a
+    /// value at a time, and the store cost more than the tile's blending of some files.)
+    /// No closures: they would be compiled without SSSE3, a call per intrinsic.
+    #[target_feature(enable = "ssse3")]
+    pub fn rgb8_row(planes: [&[f32; TILE_W]; 3], out: &mut [u8; 3 * TILE_W]) {
+        const _: () = assert!(TILE_W == 16);
+        // SAFETY: every load and store is of 16 bytes within its array.
+        unsafe {
+            let (zero, one) = (_mm_setzero_ps(), _mm_set1_ps(1.0));
+            let (scale, half) = (_mm_set1_ps(255.0), _mm_set1_ps(0.5));
+            let mut bytes = [_mm_setzero_si128(); 3];
+            for (b, p) in bytes.iter_mut().zip(planes) {
+                let mut ints = [_mm_setzero_si128(); 4];
+                for (k, i) in ints.iter_mut().enumerate() {
+                    let v = _mm_loadu_ps(p[4 * k..].as_ptr());
+                    let v = _mm_min_ps(_mm_max_ps(v, zero), one);
+                    *i = _mm_cvttps_epi32(_mm_add_ps(_mm_mul_ps(v, scale), half));
+                }
+                let lo = _mm_packs_epi32(ints[0], ints[1]);
+                let hi = _mm_packs_epi32(ints[2], ints[3]);
+                *b = _mm_packus_epi16(lo, hi);
+            }
+            for (k, [mr, mg, mb]) in INTERLEAVE.iter().enumerate() {
+                let mr = _mm_loadu_si128(mr.as_ptr().cast::<__m128i>());
+                let mg = _mm_loadu_si128(mg.as_ptr().cast::<__m128i>());
+                let mb = _mm_loadu_si128(mb.as_ptr().cast::<__m128i>());
+                let rg = _mm_or_si128(
+                    _mm_shuffle_epi8(bytes[0], mr),
+                    _mm_shuffle_epi8(bytes[1], mg),
+                );
+                let rgb = _mm_or_si128(rg, _mm_shuffle_epi8(bytes[2], mb));
+                _mm_storeu_si128(out[16 * k..].as_mut_ptr().cast::<__m128i>(), rgb);
             }
         }
     }
@@ -116,23 +177,6 @@ impl Output for RgbF32Bytes {
             }
         });
     }
-}
-
-/// [`Output::store`], built for the CPU features of `kernel`.
-#[inline(always)]
-fn store<O: Output>(kernel: Kernel, acc: &Acc, band: &mut [O::Elem], width: u32, rect: Rect) {
-    match kernel {
-        #[cfg(target_arch = "x86_64")]
-        // SAFETY: `Avx2` and `Avx512` are only made where the CPU has AVX2.
-        Kernel::Avx2 | Kernel::Avx512 => unsafe { store_avx2::<O>(acc, band, width, rect) },
-        _ => O::store(acc, band, width, rect),
-    }
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-fn store_avx2<O: Output>(acc: &Acc, band: &mut [O::Elem], width: u32, rect: Rect) {
-    O::store(acc, band, width, rect)
 }
 
 /// Render projected Gaussians (in stored order) into `out`, `width * height` pixels of
@@ -370,7 +414,7 @@ impl Band<'_> {
                 if let Some(t) = self.tone {
                     acc.tone(t, rect);
                 }
-                store::<O>(self.kernel, &acc, rows, self.width, rect);
+                O::store(&acc, rows, self.width, rect);
             }
         }
     }
@@ -572,6 +616,39 @@ mod tests {
 
     /// Rows handed out through windows of one band or several, with runs of one band
     /// (the tiniest budgets) or of all, on one thread or the pool, are the whole image.
+    /// The shuffled 8-bit row gives [`super::super::to_u8`]'s bytes, in its pixel order,
+    /// for the values where rounding or clamping decide (NaN, infinities, the halves).
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn rgb8_rows_by_shuffles_are_to_u8() {
+        if !std::is_x86_feature_detected!("ssse3") {
+            return;
+        }
+        let mut values = vec![f32::NAN, f32::INFINITY, f32::NEG_INFINITY, -0.0, 1.0, 2.0];
+        for k in 0..=255u16 {
+            // Each step's half, and the values either side of it.
+            let h = (f32::from(k) + 0.5) / 255.0;
+            values.extend([
+                h,
+                f32::from_bits(h.to_bits() - 1),
+                f32::from_bits(h.to_bits() + 1),
+            ]);
+        }
+        values.extend((0..3001).map(|i| -0.2 + 1.4 * i as f32 / 3000.0));
+        for chunk in values.chunks(48) {
+            let mut planes = [[0f32; TILE_W]; 3];
+            for (i, &v) in chunk.iter().enumerate() {
+                planes[i % 3][i / 3] = v;
+            }
+            let mut out = [0u8; 3 * TILE_W];
+            // SAFETY: the CPU has SSSE3 (checked above).
+            unsafe { x86::rgb8_row([&planes[0], &planes[1], &planes[2]], &mut out) };
+            for (i, &v) in chunk.iter().enumerate() {
+                assert_eq!(out[i], super::super::to_u8(v), "{v:e} at {i}");
+            }
+        }
+    }
+
     #[test]
     fn windows_give_the_whole_image() {
         for blend in [Blend::Sum, Blend::Alpha] {

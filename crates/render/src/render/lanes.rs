@@ -294,10 +294,16 @@ impl Acc {
 
     /// Row `j` of the three planes: the tile's [`TILE`] columns.
     #[inline(always)]
-    pub fn row(&self, j: usize) -> [&[f32]; 3] {
+    pub fn row(&self, j: usize) -> [&[f32; TILE_W]; 3] {
         let at = j * ACC_W;
-        let [r, g, b] = &self.0;
-        [&r[at..at + TILE_W], &g[at..at + TILE_W], &b[at..at + TILE_W]]
+        fn row(p: &[f32], at: usize) -> &[f32; TILE_W] {
+            p[at..at + TILE_W].try_into().expect("a tile row")
+        }
+        [
+            row(&self.0[0], at),
+            row(&self.0[1], at),
+            row(&self.0[2], at),
+        ]
     }
 
     /// Every blended value of the tile `rect` through the tone curve `t` (spec §6.6),
