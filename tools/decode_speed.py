@@ -4,9 +4,11 @@
 For each .gsi file given, makes the JPEG (cjpeg -optimize) and the WebP (cwebp) of the
 highest quality whose file is no larger than the .gsi file, from the PNG the .gsi was
 encoded from, then decodes each file to PPM as a whole process, N rounds, the decoders
-alternating within a round (so that a noisy neighbour slows every decoder alike). CPU time
-is the finished child's user + system time from the OS (os.wait4), wall time from a
-monotonic clock. Prints medians and the ratios to djpeg; with --json, writes them too.
+alternating within a round (so that a noisy neighbour slows every decoder alike), in the
+reverse order every other round. CPU time is the finished child's user + system time
+from the OS (os.wait4), wall time from a monotonic clock. Prints medians and the ratios
+to djpeg, and with --gsi-before the median of the two builds' per-round differences;
+with --json, writes them too.
 
 Usage:
   tools/decode_speed.py --gsi target/release/gsi [--gsi-before OLD/gsi] \\
@@ -103,9 +105,11 @@ def main():
         if a.gsi_before:
             decoders["gsi-before"] = [a.gsi_before, "decode", before_file, "-o", out, "--device", "cpu"]
         times = {k: [] for k in decoders}
-        for _ in range(a.rounds):
-            for k, cmd in decoders.items():
-                times[k].append(run_timed(cmd))
+        names = list(decoders)
+        for r in range(a.rounds):
+            # Forwards, then backwards: no decoder always runs after the same one.
+            for k in names if r % 2 == 0 else reversed(names):
+                times[k].append(run_timed(decoders[k]))
         row = {
             "file": gsi_file,
             "bytes": {"gsi": budget, "jpeg": os.path.getsize(jpg), "webp": os.path.getsize(webp)},
@@ -117,6 +121,11 @@ def main():
                 "cpu_ms": statistics.median(t[0] for t in ts) * 1e3,
                 "wall_ms": statistics.median(t[1] for t in ts) * 1e3,
             }
+        if a.gsi_before:
+            # The two builds ran in the same rounds: the median of their per-round
+            # differences moves less with the machine's load than either median does.
+            diffs = [n[0] - b[0] for n, b in zip(times["gsi"], times["gsi-before"])]
+            row["gsi_minus_before_cpu_ms"] = statistics.median(diffs) * 1e3
         report.append(row)
         print(f"{gsi_file}: {budget} B (JPEG q{qj} {row['bytes']['jpeg']} B, "
               f"WebP q{qw} {row['bytes']['webp']} B), medians of {a.rounds} rounds")
@@ -124,6 +133,9 @@ def main():
             r = row[k]
             print(f"  {k:10} CPU {r['cpu_ms']:6.1f} ms  wall {r['wall_ms']:6.1f} ms  "
                   f"CPU/djpeg {r['cpu_ms'] / row['djpeg']['cpu_ms']:5.2f}")
+        if a.gsi_before:
+            print(f"  gsi - gsi-before, CPU, median of the paired rounds: "
+                  f"{row['gsi_minus_before_cpu_ms']:+.2f} ms")
     if a.json:
         with open(a.json, "w") as f:
             json.dump(report, f, indent=1)

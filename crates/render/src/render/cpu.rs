@@ -40,8 +40,8 @@ pub struct Rgba8;
 /// `f32` RGB as native-endian bytes (12 per pixel), for byte buffers such as `image`'s.
 pub struct RgbF32Bytes;
 
-/// Hand each pixel of `rect` in `acc` to `put`, with the `per_pixel` elements of `band`
-/// (rows `width` pixels wide) that it goes to.
+/// Hand each pixel of `rect` in `acc` to `put` (its column in the tile and the tile's
+/// row), with the `P` elements of `band` (rows `width` pixels wide) that it goes to.
 #[inline(always)]
 fn each_pixel<E, const P: usize>(
     acc: &Acc,
@@ -118,7 +118,7 @@ mod x86 {
     /// operations (max with 0 first, so that NaN gives 0; min with 1; ×255; +0.5;
     /// truncation), four values at a time, then the planes interleaved by byte
     /// shuffles. (Left to the compiler, the conversion or the interleaving came out a
-    /// value at a time, and the store cost more than the tile's blending of some files.)
+    /// value at a time: 7–10 % of a single-thread render of kodim23, against 3.9 % here.)
     /// No closures: they would be compiled without SSSE3, a call per intrinsic.
     #[target_feature(enable = "ssse3")]
     pub fn rgb8_row(planes: [&[f32; TILE_W]; 3], out: &mut [u8; 3 * TILE_W]) {
