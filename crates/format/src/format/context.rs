@@ -226,19 +226,13 @@ pub fn decode(data: &[u8], count: usize, qs: &[Quantizer]) -> Result<Vec<u32>> {
                 let prior = &done[(k.max(1) - 1) * count..];
                 // The prediction across components depends on the prior code alone: a
                 // table of it where there are fewer codes than Gaussians.
-                let table = match mode {
-                    MODE_ACROSS => qs[k - 1].table(count, |c| across(&qs[k - 1], &q, c)),
-                    _ => None,
-                };
+                let predict = (mode == MODE_ACROSS)
+                    .then(|| qs[k - 1].lookup(count, |c| across(&qs[k - 1], &q, c)));
                 let mut prev = 0u32;
                 for i in 0..count {
-                    let p = if mode == MODE_ACROSS {
-                        match table.as_ref().and_then(|t| t.get(prior[i] as usize)) {
-                            Some(&p) => p,
-                            None => across(&qs[k - 1], &q, prior[i]),
-                        }
-                    } else {
-                        prev
+                    let p = match &predict {
+                        Some(predict) => predict.get(prior[i]),
+                        None => prev,
                     };
                     let c = i64::from(p) + ctx.get(&mut d, usize::from(q.bits) + 1)?;
                     if c < 0 || c > i64::from(max) {

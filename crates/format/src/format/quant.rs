@@ -102,6 +102,15 @@ impl Quantizer {
         ((self.max_code() as usize) < uses / 2).then(|| (0..=self.max_code()).map(f).collect())
     }
 
+    /// `f` of this quantizer's codes, needed `uses` times: from a [`Quantizer::table`]
+    /// where one pays, else computed code by code.
+    pub fn lookup<T: Copy, F: Fn(u32) -> T>(&self, uses: usize, f: F) -> Lookup<T, F> {
+        Lookup {
+            table: self.table(uses, &f),
+            f,
+        }
+    }
+
     /// Nearest code for `x`; values outside the range clamp to its ends, NaN maps to 0.
     #[inline]
     pub fn quantize(&self, x: f32) -> u32 {
@@ -110,6 +119,23 @@ impl Quantizer {
         }
         let t = (f64::from(x) - f64::from(self.min)) / (f64::from(self.max) - f64::from(self.min));
         (t.clamp(0.0, 1.0) * f64::from(self.max_code())).round() as u32
+    }
+}
+
+/// [`Quantizer::lookup`]: `f(code)` from the table, or computed where there is none or
+/// the code lies past it (an in-memory attribute may hold codes above `max`).
+pub struct Lookup<T, F> {
+    table: Option<Vec<T>>,
+    f: F,
+}
+
+impl<T: Copy, F: Fn(u32) -> T> Lookup<T, F> {
+    #[inline]
+    pub fn get(&self, code: u32) -> T {
+        match self.table.as_ref().and_then(|t| t.get(code as usize)) {
+            Some(&v) => v,
+            None => (self.f)(code),
+        }
     }
 }
 

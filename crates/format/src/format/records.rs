@@ -70,12 +70,9 @@ impl Attribute {
             let plane = &self.codes[c * n..(c + 1) * n];
             // Colour and covariance codes take a few hundred values at most: looked up,
             // each is computed once rather than once per Gaussian (its f64 division).
-            let table = q.table(n, |code| q.dequantize(code));
+            let values = q.lookup(n, |code| q.dequantize(code));
             for (o, &code) in out.iter_mut().zip(plane) {
-                o[c] = match table.as_ref().and_then(|t| t.get(code as usize)) {
-                    Some(&v) => v,
-                    None => q.dequantize(code),
-                };
+                o[c] = values.get(code);
             }
         }
         out

@@ -40,8 +40,25 @@ pub struct Rgba8;
 /// `f32` RGB as native-endian bytes (12 per pixel), for byte buffers such as `image`'s.
 pub struct RgbF32Bytes;
 
-/// Hand each pixel of `rect` in `acc` to `put` (its column in the tile and the tile's
-/// row), with the `P` elements of `band` (rows `width` pixels wide) that it goes to.
+/// Hand each row of `rect` in `acc` to `put`, with the elements of `band` (rows `width`
+/// pixels wide, `P` elements a pixel) that its pixels go to.
+#[inline(always)]
+fn each_row<E, const P: usize>(
+    acc: &Acc,
+    band: &mut [E],
+    width: u32,
+    rect: Rect,
+    mut put: impl FnMut(&mut [E], [&[f32; TILE_W]; 3]),
+) {
+    let n = (rect.x1 - rect.x0) as usize;
+    for j in 0..(rect.y1 - rect.y0) as usize {
+        let at = (j * width as usize + rect.x0 as usize) * P;
+        put(&mut band[at..at + n * P], acc.row(j));
+    }
+}
+
+/// [`each_row`], a pixel at a time: `put` gets the pixel's `P` elements, its column in
+/// the tile and the tile's row.
 #[inline(always)]
 fn each_pixel<E, const P: usize>(
     acc: &Acc,
@@ -50,14 +67,11 @@ fn each_pixel<E, const P: usize>(
     rect: Rect,
     put: impl Fn(&mut [E; P], usize, [&[f32; TILE_W]; 3]),
 ) {
-    let n = (rect.x1 - rect.x0) as usize;
-    for j in 0..(rect.y1 - rect.y0) as usize {
-        let at = (j * width as usize + rect.x0 as usize) * P;
-        let row = acc.row(j);
-        for (k, px) in band[at..at + n * P].chunks_exact_mut(P).enumerate() {
+    each_row::<E, P>(acc, band, width, rect, |out, row| {
+        for (k, px) in out.chunks_exact_mut(P).enumerate() {
             put(px.try_into().expect("P elements"), k, row);
         }
-    }
+    });
 }
 
 impl Output for RgbF32 {
@@ -76,23 +90,19 @@ impl Output for Rgb8 {
     const PER_PIXEL: usize = 3;
     #[inline(always)]
     fn store(acc: &Acc, band: &mut [u8], width: u32, rect: Rect) {
-        let n = (rect.x1 - rect.x0) as usize;
         #[cfg(target_arch = "x86_64")]
         let ssse3 = std::is_x86_feature_detected!("ssse3");
-        for j in 0..(rect.y1 - rect.y0) as usize {
-            let row = acc.row(j);
-            let at = (j * width as usize + rect.x0 as usize) * 3;
-            let out = &mut band[at..at + n * 3];
+        each_row::<_, 3>(acc, band, width, rect, |out, row| {
             #[cfg(target_arch = "x86_64")]
             if let (true, Ok(out)) = (ssse3, <&mut [u8; 3 * TILE_W]>::try_from(&mut *out)) {
                 // SAFETY: the CPU has SSSE3 (checked above).
                 unsafe { x86::rgb8_row(row, out) };
-                continue;
+                return;
             }
             for (k, px) in out.chunks_exact_mut(3).enumerate() {
                 px.copy_from_slice(&row.map(|p| super::to_u8(p[k])));
             }
-        }
+        });
     }
 }
 
