@@ -26,7 +26,8 @@ use gsi_optim::rng::SplitMix64;
 /// the gain map and the chroma map do not undo: 25 iterations score as 100 did on every
 /// validation set (LOL `val30` 20.551 against 20.555 dB, the synthetic Kodak set 21.973
 /// against 21.980, `mef13`'s median NIQE 4.412 against 4.416; the outputs 40.7 dB apart
-/// at the least) in a quarter of the mixture's time.
+/// at the least), and a 600×400 image is enhanced in 0.71 s instead of 2.27 (median wall
+/// time of 12 `val30` files, 2-core AMD EPYC).
 #[derive(Clone, Debug)]
 pub struct EnhanceOptions {
     pub iterations: u32,
