@@ -52,7 +52,7 @@ pub struct Args {
     #[arg(long, value_enum, default_value_t = DeviceArg::Auto)]
     device: DeviceArg,
     /// Enhance even an image that is not low-light (less than a quarter of it
-    /// under-exposed), or one enhanced before whose original colours were discarded. In a
+    /// under-exposed, or black), or one enhanced before whose original colours were discarded. In a
     /// batch, also enhance again the files that carry an enhancement (in place) or whose
     /// output exists (by default skipped).
     #[arg(long)]
@@ -281,8 +281,9 @@ fn enhance_file(
             enhance::Outcome::Enhanced(done) => done,
             enhance::Outcome::NotLowLight(a) => {
                 lines.push(format!(
-                    "{}: {a}: not a low-light image, left unchanged (--force enhances it anyway)",
-                    input.display()
+                    "{}: {a}: {}, left unchanged (--force enhances it anyway)",
+                    input.display(),
+                    a.verdict()
                 ));
                 if !args.in_place {
                     write(dest, &bytes)?;

@@ -329,8 +329,30 @@ fn degenerate_scenes_stay_finite_and_in_range() {
     let black = dark_file(5, 40, Blend::Sum, 0.0);
     let one = dark_file(6, 1, Blend::Alpha, 0.1);
     let none = dark_file(7, 0, Blend::Sum, 0.1);
-    for bytes in [&black, &one, &none] {
-        let out = enhanced(bytes, true);
+    let forced = EnhanceOptions {
+        force: true,
+        ..quick()
+    };
+    for (bytes, is_black) in [(&black, true), (&one, false), (&none, true)] {
+        // A black image (no Gaussian, or none with light) is left alone unless forced;
+        // forced, the enhancer still gives finite colours in range.
+        let out = match enhance::enhance(
+            &parse(bytes),
+            &quick(),
+            true,
+            &Limits::default(),
+            gsi::Device::Cpu,
+            &mut |_| {},
+        )
+        .unwrap()
+        {
+            Outcome::Enhanced(done) if !is_black => done.bytes,
+            Outcome::NotLowLight(a) if is_black => {
+                assert!(a.is_black() && a.verdict() == "nothing to lift", "{a:?}");
+                run(bytes, &forced, true, &Limits::default()).bytes
+            }
+            other => panic!("black {is_black}: {other:?}"),
+        };
         assert_sane(&out);
         assert_eq!(parse(&out).revert().unwrap(), *bytes);
     }
@@ -728,10 +750,10 @@ fn cli_a_bright_file_through_pipes_comes_back_unchanged() {
     assert!(out.stdout == bright, "the file did not come back unchanged");
 }
 
-/// Bad and degenerate inputs: a 1×1 image and a black one are enhanced; a white one is
-/// left alone with the reason; a file without colour records, and an enhanced file
-/// whose original colours were discarded, are refused in one line with exit 1 and the
-/// file left as it was.
+/// Bad and degenerate inputs: a 1×1 image is enhanced; a black one and a white one are
+/// left alone with the reason (the black one enhanced with `--force`); a file without
+/// colour records, and an enhanced file whose original colours were discarded, are
+/// refused in one line with exit 1 and the file left as it was.
 #[test]
 fn cli_bad_and_degenerate_inputs() {
     let write = |name: &str, bytes: &[u8]| {
@@ -745,25 +767,56 @@ fn cli_bad_and_degenerate_inputs() {
         r.colors = gsi::format::Attribute::fit(&[[0.01f32, 0.02, 0.01]], [8; 3]);
         to_bytes(&r, &WriteOptions::default()).unwrap()
     };
-    for (name, bytes) in [
-        ("one-pixel.gsi", tiny),
-        ("black.gsi", dark_file(41, 30, Blend::Sum, 0.0)),
-    ] {
-        let p = write(name, &bytes);
-        let out = gsi(&[
+    let enhance_in_place = |p: &std::path::Path, extra: &[&str]| {
+        let mut args = vec![
             "enhance",
             p.to_str().unwrap(),
             "--in-place",
             "--iterations",
             "5",
-        ]);
-        assert!(
-            out.status.success(),
-            "{name}: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        assert_sane(&std::fs::read(&p).unwrap());
-    }
+        ];
+        args.extend_from_slice(extra);
+        gsi(&args)
+    };
+    let p = write("one-pixel.gsi", &tiny);
+    let out = enhance_in_place(&p, &[]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_ne!(
+        std::fs::read(&p).unwrap(),
+        tiny,
+        "the one-pixel image was not enhanced"
+    );
+    assert_sane(&std::fs::read(&p).unwrap());
+
+    // Black: nothing to lift, said in one line, the file as it was; `--force` enhances it.
+    let black = dark_file(41, 30, Blend::Sum, 0.0);
+    let p = write("black.gsi", &black);
+    let out = enhance_in_place(&p, &[]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(
+        err.contains("the image is black") && err.contains("nothing to lift, left unchanged"),
+        "{err}"
+    );
+    assert_eq!(
+        err.lines().filter(|l| l.contains("black.gsi")).count(),
+        1,
+        "{err}"
+    );
+    assert_eq!(std::fs::read(&p).unwrap(), black);
+    let out = enhance_in_place(&p, &["--force"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_ne!(std::fs::read(&p).unwrap(), black);
+    assert_sane(&std::fs::read(&p).unwrap());
+
     let white = write("white.gsi", &dark_file(42, 200, Blend::Sum, 4.0));
     let out = gsi(&["enhance", white.to_str().unwrap(), "--in-place"]);
     let err = String::from_utf8_lossy(&out.stderr);

@@ -50,8 +50,8 @@ Progress = Callable[[Dict[str, Any]], None]
 
 class NotLowLightWarning(UserWarning):
     """:func:`enhance` left an image unchanged: no meaningful part of it is under-exposed
-    (the message says which share of the image, at which level). ``force=True`` enhances
-    it anyway."""
+    (the message says which share of the image, at which level), or it is black (no value
+    reaches half an 8-bit step). ``force=True`` enhances it anyway."""
 
 
 def _bytes(data: Data) -> bytes:
@@ -190,9 +190,9 @@ def enhance(
     kept, ``denoise=True`` smoothing across neighbours first,
     ``discard_original=True`` a smaller file that cannot be reverted, ``apply_from`` the
     enhancer stored in another file instead of fitting one. A file with no meaningful
-    under-exposed part is returned unchanged with a :class:`NotLowLightWarning` unless
-    ``force=True``. ``progress`` is called with a dict (``stage``, ``work``,
-    ``iteration``, ``total``, ``loss``) every iteration.
+    under-exposed part, or a black one, is returned unchanged with a
+    :class:`NotLowLightWarning` unless ``force=True``. ``progress`` is called with a dict
+    (``stage``, ``work``, ``iteration``, ``total``, ``loss``) every iteration.
     """
     raw = _bytes(data)
     out, why = _gsi.enhance(

@@ -345,7 +345,8 @@ fn enhance<'py>(
         stage2::Outcome::NotLowLight(a) => Ok((
             PyBytes::new(py, data),
             Some(format!(
-                "{a}: not a low-light image, left unchanged (force=True enhances it anyway)"
+                "{a}: {}, left unchanged (force=True enhances it anyway)",
+                a.verdict()
             )),
         )),
         stage2::Outcome::OriginalDiscarded => Err(fail(

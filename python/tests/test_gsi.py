@@ -111,6 +111,12 @@ def test_a_bright_image_is_left_unchanged_with_a_warning(encoded):
         assert gsi.enhance(encoded, force=True, iterations=5) != encoded
 
 
+def test_a_black_image_is_left_unchanged_with_a_warning():
+    black = gsi.encode(np.zeros((24, 32, 3), np.uint8), gaussians=20, effort=1)
+    with pytest.warns(gsi.NotLowLightWarning, match="the image is black.*nothing to lift"):
+        assert gsi.enhance(black) == black
+
+
 def test_errors_carry_the_clis_message(cli, tmp_path, encoded):
     cases = {
         "garbage": b"not a gsi file at all",

@@ -11,6 +11,10 @@
 //! [`DARK_SHARE`], a quarter of it, is. On the validation sets this enhances every LOL
 //! pair and every dark photograph of `mef13` (34–78 % under-exposed) and leaves its
 //! daylight scenes, lit interiors and sunsets (0–15 %) as they are.
+//!
+//! An image with no value above half an 8-bit step ([`BLACK_PEAK`]) is black, not dark:
+//! it decodes to zeros, no curve or gain can lift it, and enhancing it would only add an
+//! enhancer that changes nothing. It is left as it is, with that reason.
 
 use super::light::illumination;
 use super::operator::ColorOperator;
@@ -22,6 +26,9 @@ use std::fmt;
 pub const DARK_LEVEL: f32 = 0.2;
 /// Share of the image that must be under-exposed for it to be enhanced.
 pub const DARK_SHARE: f32 = 0.25;
+/// Brightest value below which an image is black: half an 8-bit step, where the decoder
+/// rounds every value to 0.
+pub const BLACK_PEAK: f32 = 0.5 / 255.0;
 
 /// What [`assess`] found.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -30,18 +37,41 @@ pub struct Assessment {
     pub dark_share: f32,
     /// Mean display luma of the image as it is.
     pub mean_luma: f32,
+    /// Its brightest value, any channel (0 where there is none).
+    pub peak: f32,
 }
 
 impl Assessment {
     /// Whether stage 2 should enhance the image: [`DARK_SHARE`] of it or more is
-    /// under-exposed.
+    /// under-exposed, and it is not black.
     pub fn is_low_light(&self) -> bool {
-        self.dark_share >= DARK_SHARE
+        self.dark_share >= DARK_SHARE && !self.is_black()
+    }
+
+    /// Whether no value of the image reaches [`BLACK_PEAK`]: nothing to lift.
+    pub fn is_black(&self) -> bool {
+        self.peak.is_nan() || self.peak < BLACK_PEAK
+    }
+
+    /// Why an image that is not low-light is left as it is, in a few words.
+    pub fn verdict(&self) -> &'static str {
+        if self.is_black() {
+            "nothing to lift"
+        } else {
+            "not a low-light image"
+        }
     }
 }
 
 impl fmt::Display for Assessment {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.is_black() {
+            return write!(
+                f,
+                "the image is black (no value reaches half an 8-bit step), mean luma {:.3}",
+                self.mean_luma
+            );
+        }
         write!(
             f,
             "{:.0}% of the image is under-exposed (lit below {DARK_LEVEL} on a 0-1 scale; \
@@ -71,9 +101,12 @@ pub fn assess_image(rgb: &[f32], width: usize, height: usize) -> Assessment {
     let light = illumination(rgb, width, height);
     let n = light.len().max(1) as f32;
     let dark = light.iter().filter(|&&l| l < DARK_LEVEL).count() as f32;
+    // (`max` passes over NaN.)
+    let peak = rgb.iter().fold(0.0f32, |m, &v| m.max(v));
     Assessment {
         dark_share: dark / n,
         mean_luma: super::fit::mean_luma(rgb),
+        peak,
     }
 }
 
@@ -124,13 +157,31 @@ mod tests {
     #[test]
     fn black_white_and_tiny_images_are_assessed() {
         for (img, w, h, low) in [
-            (flat(0.0, 1, 1), 1, 1, true),
+            (flat(0.01, 1, 1), 1, 1, true),
             (flat(1.0, 3, 2), 3, 2, false),
-            (vec![f32::NAN; 12], 2, 2, true),
+            (flat(0.0, 1, 1), 1, 1, false),
+            (vec![f32::NAN; 12], 2, 2, false),
         ] {
             let a = assess_image(&img, w, h);
             assert_eq!(a.is_low_light(), low, "{a:?}");
-            assert!(a.dark_share.is_finite() && a.mean_luma.is_finite());
+            assert!(a.dark_share.is_finite() && a.mean_luma.is_finite() && a.peak.is_finite());
         }
+    }
+
+    #[test]
+    fn a_black_image_has_nothing_to_lift_and_one_step_is_dark() {
+        let black = assess_image(&flat(0.0, 64, 48), 64, 48);
+        assert!(black.is_black() && !black.is_low_light(), "{black:?}");
+        assert_eq!(black.verdict(), "nothing to lift");
+        assert!(black.to_string().contains("black"), "{black}");
+        // Just under half a step everywhere is black; one pixel at half a step is not.
+        let mut img = flat(BLACK_PEAK * 0.99, 64, 48);
+        assert!(assess_image(&img, 64, 48).is_black());
+        img[3 * 100 + 1] = BLACK_PEAK;
+        let a = assess_image(&img, 64, 48);
+        assert!(!a.is_black() && a.is_low_light(), "{a:?}");
+        assert_eq!(a.verdict(), "not a low-light image");
+        // The darkest LOL images average two 8-bit steps: dark, not black.
+        assert!(assess_image(&flat(2.0 / 255.0, 64, 48), 64, 48).is_low_light());
     }
 }

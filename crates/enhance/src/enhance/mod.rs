@@ -155,7 +155,8 @@ const OWN_LEVEL_MIN: f32 = 0.01;
 pub enum Outcome {
     /// The enhanced file, and what the fit did.
     Enhanced(Box<Enhanced>),
-    /// Left as it is: no meaningful part of the image is under-exposed.
+    /// Left as it is: no meaningful part of the image is under-exposed, or it is black
+    /// ([`assess::Assessment::verdict`] says which).
     NotLowLight(assess::Assessment),
     /// Left as it is: the file was enhanced before and its original colours were
     /// discarded, so enhancing again would brighten what was brightened.
