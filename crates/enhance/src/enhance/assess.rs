@@ -37,7 +37,9 @@ pub struct Assessment {
     pub dark_share: f32,
     /// Mean display luma of the image as it is.
     pub mean_luma: f32,
-    /// Its brightest value, any channel (0 where there is none).
+    /// Its brightest value, any channel (0 where there is none). [`assess`] also counts
+    /// each Gaussian's own light at its centre, which a working size too coarse for it
+    /// can miss.
     pub peak: f32,
 }
 
@@ -93,7 +95,31 @@ pub fn assess(scene: &Scene, work_side: u32) -> Assessment {
     if let Some(t) = &scene.tone {
         t.apply(&mut img);
     }
-    assess_image(&img, w as usize, h as usize)
+    let mut a = assess_image(&img, w as usize, h as usize);
+    // A Gaussian much smaller than a working pixel (a star, a distant lamp) can fall
+    // between the working size's pixel centres; its own light at its centre, `o·c`,
+    // keeps such an image from reading as black.
+    let g = &scene.gaussians;
+    let own = (0..g.len())
+        .map(|i| {
+            let o = g.opacity_of(i);
+            g.colors[i].iter().fold(0.0f32, |m, &c| m.max(o * c))
+        })
+        .fold(0.0f32, f32::max);
+    a.peak = a.peak.max(through(scene.tone.as_ref(), own));
+    a
+}
+
+/// `v` as shown through the tone curve `tone`, where there is one.
+fn through(tone: Option<&gsi_format::model::ToneCurve>, v: f32) -> f32 {
+    match tone {
+        Some(t) => {
+            let mut px = [v; 3];
+            t.apply(&mut px);
+            px.into_iter().fold(0.0f32, f32::max)
+        }
+        None => v,
+    }
 }
 
 /// [`assess`] of an image of `width × height` interleaved RGB display values.
@@ -183,5 +209,37 @@ mod tests {
         assert_eq!(a.verdict(), "not a low-light image");
         // The darkest LOL images average two 8-bit steps: dark, not black.
         assert!(assess_image(&flat(2.0 / 255.0, 64, 48), 64, 48).is_low_light());
+    }
+
+    #[test]
+    fn a_star_between_the_working_pixels_is_not_black() {
+        use gsi_format::model::{Blend, CovParam, GaussianSet, WeightRule};
+        // One Gaussian of a tenth of a pixel at 4000 × 3000, on a pixel boundary of the
+        // 256-pixel working size (a Cholesky factor of 1e-5: σ 0.04 px, 0.003 working px).
+        let star = |colour: f32| Scene {
+            weights: WeightRule::PerPixel,
+            width: 4000,
+            height: 3000,
+            blend: Blend::Sum,
+            cov_param: CovParam::Cholesky,
+            gaussians: GaussianSet {
+                positions: vec![[0.5, 0.5]],
+                cov: vec![[1e-5, 0.0, 1e-5]],
+                colors: vec![[colour; 3]],
+                ..GaussianSet::default()
+            },
+            tone: None,
+        };
+        let (w, h) = work_size(4000, 3000, 256);
+        let op = ColorOperator::new(&star(1.0), w, h);
+        let mut img = vec![0.0f32; (w * h * 3) as usize];
+        op.render(&star(1.0).gaussians.colors, &mut img);
+        assert!(
+            img.iter().all(|&v| v < BLACK_PEAK),
+            "the working size sees it"
+        );
+        let a = assess(&star(1.0), 256);
+        assert!(!a.is_black() && a.is_low_light() && a.peak == 1.0, "{a:?}");
+        assert!(assess(&star(BLACK_PEAK * 0.5), 256).is_black());
     }
 }
