@@ -13,13 +13,16 @@
 //! daylight scenes, lit interiors and sunsets (0–15 %) as they are.
 //!
 //! An image with no value above half an 8-bit step ([`BLACK_PEAK`]) is black, not dark:
-//! it decodes to zeros, no curve or gain can lift it, and enhancing it would only add an
-//! enhancer that changes nothing. It is left as it is, with that reason.
+//! every value decodes to 0 in 8 bits, and a lift to middle grey would multiply what is
+//! left below that step by hundreds. It is left as it is, with that reason; `force`
+//! enhances it anyway (content finer than 8 bits, from a 16-bit or float source, may
+//! want that).
 
 use super::light::illumination;
 use super::operator::ColorOperator;
 use super::working::work_size;
 use gsi_format::model::Scene;
+use gsi_render::render::project_scene;
 use std::fmt;
 
 /// Illumination below which a region counts as under-exposed.
@@ -32,14 +35,15 @@ pub const BLACK_PEAK: f32 = 0.5 / 255.0;
 
 /// What [`assess`] found.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[non_exhaustive]
 pub struct Assessment {
     /// Share of the image whose illumination is below [`DARK_LEVEL`], in `[0, 1]`.
     pub dark_share: f32,
     /// Mean display luma of the image as it is.
     pub mean_luma: f32,
     /// Its brightest value, any channel (0 where there is none). [`assess`] also counts
-    /// each Gaussian's own light at its centre, which a working size too coarse for it
-    /// can miss.
+    /// the light each Gaussian gives its nearest pixel at full size, which a working size
+    /// too coarse for it can miss.
     pub peak: f32,
 }
 
@@ -50,12 +54,14 @@ impl Assessment {
         self.dark_share >= DARK_SHARE && !self.is_black()
     }
 
-    /// Whether no value of the image reaches [`BLACK_PEAK`]: nothing to lift.
+    /// Whether no value of the image reaches [`BLACK_PEAK`]: every value would decode to
+    /// 0 in 8 bits. (A NaN peak, which [`assess`] never gives, counts as black.)
     pub fn is_black(&self) -> bool {
         self.peak.is_nan() || self.peak < BLACK_PEAK
     }
 
-    /// Why an image that is not low-light is left as it is, in a few words.
+    /// The reason [`super::Outcome::NotLowLight`] gives, where [`Self::is_low_light`] is
+    /// false: "nothing to lift" for a black image, else "not a low-light image".
     pub fn verdict(&self) -> &'static str {
         if self.is_black() {
             "nothing to lift"
@@ -96,30 +102,34 @@ pub fn assess(scene: &Scene, work_side: u32) -> Assessment {
         t.apply(&mut img);
     }
     let mut a = assess_image(&img, w as usize, h as usize);
-    // A Gaussian much smaller than a working pixel (a star, a distant lamp) can fall
-    // between the working size's pixel centres; its own light at its centre, `o·c`,
-    // keeps such an image from reading as black.
-    let g = &scene.gaussians;
-    let own = (0..g.len())
-        .map(|i| {
-            let o = g.opacity_of(i);
-            g.colors[i].iter().fold(0.0f32, |m, &c| m.max(o * c))
-        })
-        .fold(0.0f32, f32::max);
-    a.peak = a.peak.max(through(scene.tone.as_ref(), own));
+    a.peak = a.peak.max(own_light(scene));
     a
 }
 
-/// `v` as shown through the tone curve `tone`, where there is one.
-fn through(tone: Option<&gsi_format::model::ToneCurve>, v: f32) -> f32 {
-    match tone {
-        Some(t) => {
-            let mut px = [v; 3];
-            t.apply(&mut px);
-            px.into_iter().fold(0.0f32, f32::max)
+/// The most light any one Gaussian gives a pixel of the full-size image: its weight at
+/// the pixel centre nearest its own (spec §6.3) times its colour, through the tone curve
+/// where the scene has one. A Gaussian much smaller than a working pixel (a star, a
+/// distant lamp) can fall between the working size's pixel centres; this keeps an image
+/// that shows it from reading as black, and one whose Gaussians reach no pixel centre
+/// still reads as black.
+fn own_light(scene: &Scene) -> f32 {
+    let (w, h) = (scene.width, scene.height);
+    let mut most = 0.0f32;
+    for g in project_scene(scene, w, h) {
+        // The nearest pixel centre, kept within the box; `project` gives finite means.
+        let near = |m: f32, lo: u32, hi: u32| ((m - 0.5).round().max(0.0) as u32).clamp(lo, hi);
+        let i = near(g.mean[0], g.bbox.x0, g.bbox.x1);
+        let j = near(g.mean[1], g.bbox.y0, g.bbox.y1);
+        let Some(alpha) = g.alpha_at(i, j, scene.blend) else {
+            continue;
+        };
+        for (k, c) in g.color.iter().enumerate() {
+            let v = alpha * c;
+            let shown = scene.tone.as_ref().map_or(v, |t| t.eval(k, v));
+            most = most.max(shown);
         }
-        None => v,
     }
+    most
 }
 
 /// [`assess`] of an image of `width × height` interleaved RGB display values.
@@ -214,32 +224,41 @@ mod tests {
     #[test]
     fn a_star_between_the_working_pixels_is_not_black() {
         use gsi_format::model::{Blend, CovParam, GaussianSet, WeightRule};
-        // One Gaussian of a tenth of a pixel at 4000 × 3000, on a pixel boundary of the
-        // 256-pixel working size (a Cholesky factor of 1e-5: σ 0.04 px, 0.003 working px).
-        let star = |colour: f32| Scene {
+        // One Gaussian of σ 0.04 px (a Cholesky factor of 1e-5) in a 4000 × 3000 image;
+        // the 256-pixel working size clamps it to σ 0.01 working px, half a working pixel
+        // from the nearest centre.
+        let star = |(u, v): (f32, f32), colour: f32| Scene {
             weights: WeightRule::PerPixel,
             width: 4000,
             height: 3000,
             blend: Blend::Sum,
             cov_param: CovParam::Cholesky,
             gaussians: GaussianSet {
-                positions: vec![[0.5, 0.5]],
+                positions: vec![[u, v]],
                 cov: vec![[1e-5, 0.0, 1e-5]],
                 colors: vec![[colour; 3]],
                 ..GaussianSet::default()
             },
             tone: None,
         };
+        // On the centre of pixel (2000, 1500): that pixel shows it at full strength.
+        let on_centre = (2000.5 / 4000.0, 1500.5 / 3000.0);
+        let lit = star(on_centre, 1.0);
         let (w, h) = work_size(4000, 3000, 256);
-        let op = ColorOperator::new(&star(1.0), w, h);
         let mut img = vec![0.0f32; (w * h * 3) as usize];
-        op.render(&star(1.0).gaussians.colors, &mut img);
+        ColorOperator::new(&lit, w, h).render(&lit.gaussians.colors, &mut img);
         assert!(
             img.iter().all(|&v| v < BLACK_PEAK),
             "the working size sees it"
         );
-        let a = assess(&star(1.0), 256);
+        let a = assess(&lit, 256);
         assert!(!a.is_black() && a.is_low_light() && a.peak == 1.0, "{a:?}");
-        assert!(assess(&star(BLACK_PEAK * 0.5), 256).is_black());
+        // Too faint, or between pixel centres where its 3σ box holds none: black.
+        assert!(assess(&star(on_centre, BLACK_PEAK * 0.5), 256).is_black());
+        assert!(assess(&star((0.5, 0.5), 1.0), 256).is_black());
+        let mut full = vec![0.0f32; 4000 * 3000 * 3];
+        let between = star((0.5, 0.5), 1.0);
+        gsi_render::render::render_into(&between, 4000, 3000, &mut full).unwrap();
+        assert!(full.iter().all(|&v| v == 0.0), "it decodes to black");
     }
 }
