@@ -62,13 +62,7 @@ fn score(low: &[u8], reference: Option<&[u8]>, out: &[u8], w: u32, h: u32) -> Sc
 /// several, a grain that NIQE reads as natural texture.
 fn gamma_curve_f32(rgb: &[f32]) -> Vec<u8> {
     let v = |c: f32| f64::from(c.clamp(0.0, 1.0));
-    let [wr, wg, wb] = metrics::BT601;
-    let n = (rgb.len() / 3).max(1) as f64;
-    let mean: f64 = rgb
-        .chunks_exact(3)
-        .map(|p| wr * v(p[0]) + wg * v(p[1]) + wb * v(p[2]))
-        .sum::<f64>()
-        / n;
+    let mean = f64::from(gsi::enhance::working::mean_luma(rgb));
     let g = 0.5f64.ln() / mean.clamp(1e-6, 1.0 - 1e-6).ln();
     rgb.iter()
         .map(|&c| gsi::render::to_u8(v(c).powf(g) as f32))
