@@ -25,8 +25,10 @@
 //! 0.10 M of its 1.11 M chunk-rows, and its decode (parse and render, in process) takes
 //! 15.8 ms against 20.7 ms by §6.3. Tiles are 16 rows, the rule's bands, so no weight is
 //! carried from one tile to the next. (The blending is a trait with inlined methods, not
-//! a closure: a closure with two callers is compiled apart from the `#[target_feature]`
-//! function, without AVX, and the loop called it for every chunk-row at half the speed.)
+//! a closure: as a closure with two callers it was compiled apart from the
+//! `#[target_feature]` function, without AVX, and the loop called it for every chunk-row
+//! at half the speed. LLVM inlines some closures and not others; the hot ones here are
+//! functions.)
 //!
 //! The encoder's loops (`gsi_fit::fit`) share [`Footprint`] and the polynomial; they
 //! may fuse multiply-adds (`F`), since a fit needs the decoder's values, not its bits.
@@ -411,8 +413,8 @@ fn column_rows<const M: usize, const CAP: bool, B: Blender>(
     // kept in arrays of booleans, which LLVM packs to bytes and back, splitting the
     // lanes of `w` and `r` across registers.)
     let carried = |w: f32, m: f32| (w >= COLUMN_DARK) | (m == 0.0);
-    // (Plain loops, not `Iterator::fold`: LLVM left the sixteen-lane fold out of line,
-    // a call compiled without AVX on every row that starts a lane.)
+    // (Plain loops, not `Iterator::fold`: LLVM left the fold over a row's lanes out of
+    // line, a call compiled without AVX on every row that starts a lane.)
     let all_carried = |w: &[V; M]| {
         let mut all = true;
         for c in 0..M {
@@ -449,6 +451,9 @@ fn column_rows<const M: usize, const CAP: bool, B: Blender>(
             for l in 0..LANES {
                 any |= !carried(w[c][l], mask[c][l]) & (power[l] >= COLUMN_START);
             }
+            // (Where no lane of the chunk starts, a lane neither carried nor started
+            // takes `r = 0` beside its `w = 0`; that ratio is never used, since a lane
+            // below the dark level is not carried and takes both anew at its start.)
             let (w1, r1) = if any {
                 f.column_start(&power, &dxs, dy0, dy1)
             } else {
@@ -484,9 +489,10 @@ fn column_rows<const M: usize, const CAP: bool, B: Blender>(
 }
 
 /// One row down the column rule: each weight times its ratio, each ratio times `k`.
-/// (Functions rather than closures, here and in [`blend_chunks`]: a closure with
-/// several callers was compiled apart from the `#[target_feature]` function, without
-/// AVX, and called on every row.)
+/// (A function rather than a closure, as is [`blend_chunks`]: written as closures of
+/// `column_rows`, the two were compiled apart from the `#[target_feature]` function,
+/// without AVX, and called on every row; kodim23's single-thread render took 20 ms
+/// instead of 13.)
 #[inline(always)]
 fn step<const M: usize>(w: &mut [V; M], r: &mut [V; M], k: f32) {
     for c in 0..M {
@@ -497,9 +503,10 @@ fn step<const M: usize>(w: &mut [V; M], r: &mut [V; M], k: f32) {
 }
 
 /// Blend the alphas of weights `w` (opacity times weight, capped with `CAP`, times the
-/// lane's `mask` of 1 or 0, 0 under [`ALPHA_MIN`]) into the `M` chunks from `at`.
-/// Every chunk-row is blended, lit or not: adding 0 changes no sum and multiplies no
-/// transmittance, and a branch on "lit" measured no faster.
+/// lane's `mask` of 1 or 0, 0 under [`ALPHA_MIN`]) into the `M` chunks from `at`: a
+/// chunk at a time or all at once, as [`Blender::BY_CHUNK`] says. `mask` is 1 or 0, and
+/// `a·1` is `a`. Every chunk-row is blended, lit or not: adding 0 changes no sum and
+/// multiplies no transmittance, and a branch on "lit" measured no faster.
 #[inline(always)]
 fn blend_chunks<const M: usize, const CAP: bool, B: Blender>(
     into: &mut B,
@@ -568,10 +575,11 @@ impl Footprint<'_> {
 
 /// Where a chunk-row of alphas goes (a trait rather than a closure: see the module's doc).
 trait Blender {
-    /// Whether a row of several chunks is blended a chunk at a time, each chunk's alphas
-    /// as soon as they are made, rather than all at once. `sum` blending measured 4–5 %
-    /// faster a chunk at a time (kodim23 and a random scene, single thread); `alpha`
-    /// blending 9–11 % slower, counting the pixels that stop twice a row.
+    /// Whether the column rule blends a row of several chunks a chunk at a time, each
+    /// chunk's alphas as soon as they are made, rather than all at once (the per-pixel
+    /// rule blends one chunk at a time anyway). `sum` blending measured 4–5 % faster a
+    /// chunk at a time (kodim23 and a random scene, single thread); `alpha` blending
+    /// 9–11 % slower, its count of the pixels that stop then taken twice a row.
     const BY_CHUNK: bool;
 
     /// Blend Gaussian `g`'s `alpha` into the `M` chunks of [`LANES`] pixels from `at` of
@@ -589,8 +597,8 @@ impl Blender for Sum<'_> {
     fn blend<const M: usize>(&mut self, g: &Projected, at: usize, alpha: &[V; M]) {
         let color = g.color;
         for (plane, c) in self.0 .0.iter_mut().zip(color) {
-            for (k, alpha) in alpha.iter().enumerate() {
-                let px = &mut plane[at + k * LANES..][..LANES];
+            for (chunk, alpha) in alpha.iter().enumerate() {
+                let px = &mut plane[at + chunk * LANES..][..LANES];
                 // Where alpha is 0 this adds ±0, which leaves every sum as it is: a sum
                 // that starts at +0 is never −0.
                 for l in 0..LANES {
@@ -615,8 +623,8 @@ impl Blender for Over<'_> {
     #[inline(always)]
     fn blend<const M: usize>(&mut self, g: &Projected, at: usize, alpha: &[V; M]) {
         let mut died = 0;
-        for (k, alpha) in alpha.iter().enumerate() {
-            let at = at + k * LANES;
+        for (chunk, alpha) in alpha.iter().enumerate() {
+            let at = at + chunk * LANES;
             let t = &mut self.trans[at..at + LANES];
             let mut a = [0f32; LANES];
             for l in 0..LANES {
