@@ -3,7 +3,7 @@
 //! enhanced in the container with the defaults and with each default turned off,
 //! decoded and scored; contact sheets in `DIR/enhance/`.
 
-use crate::metrics_table::{auto_gamma_exponent, gamma_curve, README_ROWS};
+use crate::metrics_table::{auto_gamma_exponent, gamma_curve, gamma_for_mean, README_ROWS};
 use crate::{commit, images, load, lowlight, machine, mean, median, replace_section};
 use gsi::enhance::curve::CurveOptions;
 use gsi::enhance::exposure::Exposure;
@@ -63,7 +63,7 @@ fn score(low: &[u8], reference: Option<&[u8]>, out: &[u8], w: u32, h: u32) -> Sc
 fn gamma_curve_f32(rgb: &[f32]) -> Vec<u8> {
     let v = |c: f32| f64::from(c.clamp(0.0, 1.0));
     let mean = f64::from(gsi::enhance::working::mean_luma(rgb));
-    let g = 0.5f64.ln() / mean.clamp(1e-6, 1.0 - 1e-6).ln();
+    let g = gamma_for_mean(mean.clamp(1e-6, 1.0 - 1e-6));
     rgb.iter()
         .map(|&c| gsi::render::to_u8(v(c).powf(g) as f32))
         .collect()
@@ -190,7 +190,8 @@ fn run_set(low: &Path, high: Option<&Path>, limit: usize) -> Vec<Row> {
         let t0 = Instant::now();
         let done = run(&opts);
         let enhance_s = t0.elapsed().as_secs_f64();
-        let stage1 = decode(&e.bytes);
+        let stage1_render = render(&e.bytes);
+        let stage1 = stage1_render.to_rgb8();
         let sc = |out: &[u8]| score(&low_rgb, reference.as_deref(), out, w, h);
         let (out, kept_bytes, discarded_bytes) = match &done {
             Some(d) => {
@@ -232,7 +233,7 @@ fn run_set(low: &Path, high: Option<&Path>, limit: usize) -> Vec<Row> {
             variants,
             auto_gamma: sc(&gamma_curve(&low_rgb, auto_gamma_exponent(&low_rgb, w, h))),
             auto_gamma_stage1: sc(&gamma_curve(&stage1, auto_gamma_exponent(&stage1, w, h))),
-            auto_gamma_stage1_float: sc(&gamma_curve_f32(&render(&e.bytes).data)),
+            auto_gamma_stage1_float: sc(&gamma_curve_f32(&stage1_render.data)),
             reference_luma: reference.as_ref().map(|r| mean_luma(r, w, h)),
             pictures: (low_rgb, out, reference),
         };

@@ -40,7 +40,11 @@ pub(crate) fn gamma_curve(low: &[u8], g: f64) -> Vec<u8> {
 /// The exponent that brings the mean BT.601 luma of `low` to 0.5 (auto-gamma).
 pub(crate) fn auto_gamma_exponent(low: &[u8], w: u32, h: u32) -> f64 {
     let luma = metrics::luma(Rgb8::new(w, h, low).unwrap());
-    let mean = luma.iter().sum::<f64>() / luma.len() as f64 / 255.0;
+    gamma_for_mean(luma.iter().sum::<f64>() / luma.len() as f64 / 255.0)
+}
+
+/// The power that takes a mean luma of `mean` (0–1) to 0.5.
+pub(crate) fn gamma_for_mean(mean: f64) -> f64 {
     0.5f64.ln() / mean.ln()
 }
 

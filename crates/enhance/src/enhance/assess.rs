@@ -41,9 +41,9 @@ pub struct Assessment {
     pub dark_share: f32,
     /// Mean display luma of the image as it is.
     pub mean_luma: f32,
-    /// Its brightest value, any channel (0 where there is none). [`assess`] also counts
-    /// the light each Gaussian gives its nearest pixel at full size, which a working size
-    /// too coarse for it can miss.
+    /// Its brightest value, any channel (0 where there is none). Where that is under
+    /// [`BLACK_PEAK`], [`assess`] also counts the light each Gaussian gives its nearest
+    /// pixel at full size, which a working size too coarse for it can miss.
     pub peak: f32,
 }
 
@@ -102,7 +102,10 @@ pub fn assess(scene: &Scene, work_side: u32) -> Assessment {
         t.apply(&mut img);
     }
     let mut a = assess_image(&img, w as usize, h as usize);
-    a.peak = a.peak.max(own_light(scene));
+    // Only an image that looks black at the working size needs each Gaussian projected.
+    if a.is_black() {
+        a.peak = a.peak.max(own_light(scene));
+    }
     a
 }
 
