@@ -1,6 +1,6 @@
 //! File edges of the CLI: `-` for stdin/stdout, and writes that never leave a half file.
 
-use std::fs::File;
+use std::fs::{File, OpenOptions};
 use std::io::{self, BufReader, Read, Write};
 use std::path::{Path, PathBuf};
 
@@ -21,7 +21,11 @@ pub fn write_output(path: &Path, bytes: &[u8]) -> io::Result<()> {
 /// Write to `path` (or standard output for `-`) what `write` writes, as it writes it.
 ///
 /// A file is written to a temporary sibling, synced, then renamed over the target, so a
-/// failure at any point (in `write` too) leaves whatever was at `path` untouched.
+/// failure at any point (in `write` too) leaves whatever was at `path` untouched. A
+/// symbolic link is written through: the file it names is replaced and the link stays.
+/// A target that is neither a file nor a folder (`/dev/null`, a FIFO, a terminal) is
+/// written in place: renaming over it would put a regular file where the device was,
+/// which for `/dev/null` run as root breaks every program on the machine.
 pub fn write_with<E: From<io::Error>>(
     path: &Path,
     write: impl FnOnce(&mut dyn Write) -> Result<(), E>,
@@ -31,6 +35,19 @@ pub fn write_with<E: From<io::Error>>(
         write(&mut out)?;
         return Ok(out.flush()?);
     }
+    if std::fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir()) {
+        let mut out =
+            io::BufWriter::with_capacity(1 << 16, OpenOptions::new().write(true).open(path)?);
+        write(&mut out)?;
+        return Ok(out.flush()?);
+    }
+    let is_link = std::fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_symlink());
+    let resolved = if is_link {
+        std::fs::canonicalize(path).ok()
+    } else {
+        None
+    };
+    let path = resolved.as_deref().unwrap_or(path);
     let tmp = temp_sibling(path);
     let result = (|| {
         // Buffered: encoders write in small pieces; large writes pass straight through.
@@ -99,5 +116,89 @@ pub fn print_line(text: &str) -> Result<(), crate::Failure> {
             Err(crate::Failure(format!("standard output: {e}")))
         }
         _ => Ok(()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A fresh, empty folder for one test.
+    fn scratch(name: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("gsi-io-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        dir
+    }
+
+    fn names(dir: &Path) -> Vec<String> {
+        let mut v: Vec<_> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        v.sort();
+        v
+    }
+
+    #[test]
+    fn a_file_is_replaced_whole_or_left_as_it_was() {
+        let dir = scratch("file");
+        let f = dir.join("out.bin");
+        std::fs::write(&f, b"old").unwrap();
+        let failed = write_with(&f, |out| {
+            out.write_all(b"half")?;
+            Err(io::Error::other("the encoder gave up"))
+        });
+        assert!(failed.is_err());
+        assert_eq!(std::fs::read(&f).unwrap(), b"old");
+        write_output(&f, b"new").unwrap();
+        assert_eq!(std::fs::read(&f).unwrap(), b"new");
+        assert_eq!(names(&dir), ["out.bin"], "no temporary file is left behind");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_link_is_written_through_and_stays_a_link() {
+        let dir = scratch("link");
+        let target = dir.join("target.bin");
+        let link = dir.join("link.bin");
+        std::fs::write(&target, b"old").unwrap();
+        std::os::unix::fs::symlink(&target, &link).unwrap();
+        write_output(&link, b"new").unwrap();
+        assert!(std::fs::symlink_metadata(&link)
+            .unwrap()
+            .file_type()
+            .is_symlink());
+        assert_eq!(std::fs::read(&target).unwrap(), b"new");
+        assert_eq!(names(&dir), ["link.bin", "target.bin"]);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// `-o /dev/null` or a named pipe: the special file is written, never renamed over.
+    #[cfg(unix)]
+    #[test]
+    fn a_pipe_is_written_in_place_and_stays_a_pipe() {
+        use std::os::unix::fs::FileTypeExt;
+        let dir = scratch("fifo");
+        let fifo = dir.join("pipe");
+        let made = std::process::Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap();
+        assert!(made.success(), "mkfifo failed");
+        let reader = {
+            let fifo = fifo.clone();
+            std::thread::spawn(move || std::fs::read(fifo).unwrap())
+        };
+        write_output(&fifo, b"through the pipe").unwrap();
+        // Checked before joining: a reader left waiting on a replaced pipe never returns.
+        assert!(std::fs::symlink_metadata(&fifo)
+            .unwrap()
+            .file_type()
+            .is_fifo());
+        assert_eq!(reader.join().unwrap(), b"through the pipe");
+        assert_eq!(names(&dir), ["pipe"]);
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -230,6 +230,31 @@ fn decode_sizes_and_pipes() {
     std::fs::remove_dir_all(dir).unwrap();
 }
 
+/// `-o /dev/null` writes into the device. Renamed over, as a regular output file is, it
+/// would leave a regular file at `/dev/null` (for root), and every later program that
+/// reads it as empty input would read old output instead.
+#[cfg(unix)]
+#[test]
+fn decoding_to_dev_null_leaves_it_a_device() {
+    use std::os::unix::fs::FileTypeExt;
+    let null = Path::new("/dev/null");
+    let was = std::fs::symlink_metadata(null).unwrap().file_type();
+    let good = corpus("valid")[0].clone();
+    let out = gsi(&["decode", good.to_str().unwrap(), "-o", "/dev/null"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let now = std::fs::symlink_metadata(null).unwrap().file_type();
+    assert_eq!(
+        now.is_char_device(),
+        was.is_char_device(),
+        "/dev/null changed kind"
+    );
+    assert!(!now.is_file(), "/dev/null became a regular file");
+}
+
 #[test]
 fn a_failed_decode_leaves_the_output_untouched() {
     let dir = tmp_dir("atomic");
