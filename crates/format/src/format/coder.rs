@@ -169,7 +169,7 @@ impl<'a> Decoder<'a> {
         Ok(b)
     }
 
-    #[inline]
+    #[inline(always)]
     pub fn bit(&mut self, p: &mut Prob) -> Result<bool> {
         let bound = (self.range >> PROB_BITS) * u32::from(p.0);
         let bit = self.code >= bound;
@@ -250,6 +250,7 @@ impl Magnitude {
 
     /// Decode a magnitude `m`; one with `m + 1 ≥ 2^max_bits` is refused as out of range
     /// as soon as its unary prefix says so (`max_bits` ≤ [`MAX_MAGNITUDE_BITS`]).
+    #[inline(always)]
     pub fn get(&mut self, d: &mut Decoder, max_bits: usize) -> Result<u64> {
         let max_bits = max_bits.min(MAX_MAGNITUDE_BITS);
         let mut e = 0;
@@ -286,6 +287,7 @@ impl Signed {
         }
     }
 
+    #[inline(always)]
     pub fn get(&mut self, d: &mut Decoder, max_bits: usize) -> Result<i64> {
         let m = self.magnitude.get(d, max_bits)? as i64;
         if m != 0 && d.bit(&mut self.sign)? {
@@ -335,6 +337,7 @@ impl Tree {
         }
     }
 
+    #[inline(always)]
     pub fn get(&mut self, d: &mut Decoder) -> Result<u32> {
         let (top, rest) = (self.top(), self.bits - self.top());
         let mut node = 1usize;

@@ -24,6 +24,7 @@ mod cpu;
 #[doc(hidden)]
 pub mod lanes;
 mod project;
+mod rounding;
 mod tiles;
 
 /// The output layouts [`render_as`] writes, for the decoder API's own limits.

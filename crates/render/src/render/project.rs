@@ -3,6 +3,7 @@
 //! Every renderer starts here, so that the clamps, the conic and the pixel box, which
 //! decide which pixels a Gaussian may touch, are computed once and the same way.
 
+use super::rounding::{ceil_f32, floor_f32};
 use super::TILE;
 use gsi_format::contract::{
     exp, ALPHA_MAX, ALPHA_MIN, COLOR_MAX, COLUMN_BAND, COLUMN_DARK, COLUMN_START, COLUMN_STEEP,
@@ -242,8 +243,21 @@ fn carried_in(mean: [f32; 2], conic: [f32; 3], bbox: &PixelBox) -> bool {
 /// [`Projected::cutoff`] for an opacity.
 #[inline]
 fn cutoff_of(opacity: f32) -> f32 {
+    // Every Gaussian of a `sum` file has opacity 1: its cut-off is a constant, and the
+    // logarithm a call into libm per Gaussian.
+    if opacity == 1.0 {
+        return CUTOFF_AT_ONE;
+    }
+    cutoff_by_log(opacity)
+}
+
+/// `ln(ALPHA_MIN / opacity) − 10⁻³`, in `f64`, rounded to `f32`.
+fn cutoff_by_log(opacity: f32) -> f32 {
     ((f64::from(ALPHA_MIN) / f64::from(opacity)).ln() - 1e-3) as f32
 }
+
+/// [`cutoff_by_log`] of 1 (checked by a test).
+const CUTOFF_AT_ONE: f32 = -5.542_263_5;
 
 /// Project Gaussian `index` of `scene` for a `width × height` output.
 ///
@@ -333,8 +347,8 @@ pub fn project_scene(scene: &Scene, width: u32, height: u32) -> Vec<Projected> {
 /// range: `ceil(m - r - 0.5) ..= floor(m + r - 0.5)`, clipped. Computed in `f32` and
 /// clamped in float before the cast, so a centre far outside the image cannot overflow.
 fn pixel_span(m: f32, r: f32, n: u32) -> Option<(u32, u32)> {
-    let lo = (m - r - 0.5).ceil();
-    let hi = (m + r - 0.5).floor();
+    let lo = ceil_f32(m - r - 0.5);
+    let hi = floor_f32(m + r - 0.5);
     // Also rejects NaN.
     if !(lo <= hi && hi >= 0.0) {
         return None;
@@ -439,6 +453,13 @@ mod tests {
             assert!(o * cut.exp() < ALPHA_MIN, "{o}");
             assert!(o * (cut + 2e-3).exp() >= ALPHA_MIN, "{o}");
         }
+    }
+
+    #[test]
+    fn the_cutoff_at_opacity_one_is_the_logarithms() {
+        assert_eq!(CUTOFF_AT_ONE.to_bits(), cutoff_by_log(1.0).to_bits());
+        assert_eq!(cutoff_of(1.0).to_bits(), cutoff_by_log(1.0).to_bits());
+        assert_eq!(cutoff_of(0.5).to_bits(), cutoff_by_log(0.5).to_bits());
     }
 
     /// The shortcut is taken only where no pixel of the box is near the dark level:

@@ -17,6 +17,7 @@
 //! (a run has at least one slot; a single list never exceeds the number of Gaussians).
 
 use super::project::{offset, term_bound, Projected};
+use super::rounding::{ceil_f64, floor_f64};
 use super::TILE;
 use std::ops::Range;
 
@@ -106,28 +107,27 @@ pub fn band_tiles(g: &Projected, rows: Range<u32>) -> Option<(u32, u32)> {
     // `(−B·y − w)/A` to `(−B·y + w)/A`, `w = sqrt(A·t − det·y²)`. Its right end is
     // concave in `y`, greatest at `y = −B·x/C` with `x = sqrt(t·C/det)` (where
     // `∂Q/∂y = 0`); the left end mirrors it. Over the band's rows each is at its
-    // extreme row clamped into them.
-    let ymax = (a * t / det).sqrt();
+    // extreme row clamped into them. (Written as `ymax = √A·s` and `ytop = −B·s/√C` with
+    // `s = √(t/det)`, so that one division and the square roots run side by side rather
+    // than one after another: the band loop calls this for every Gaussian of every band.
+    // Rounding moves these ends by ulps, far inside the pixel of slack below.)
+    let s = (t / det).sqrt();
+    let ymax = a.sqrt() * s;
     let (lo, hi) = (dys[0].max(-ymax), dys[1].min(ymax));
     if lo > hi {
         return None;
     }
-    let ends = |y: f64| {
-        let w = (a * t - det * y * y).max(0.0).sqrt();
-        ((-bb * y - w) / a, (-bb * y + w) / a)
-    };
-    let ytop = -bb * (t * c / det).sqrt() / c;
-    let right = ends(ytop.clamp(lo, hi)).1;
-    let left = ends((-ytop).clamp(lo, hi)).0;
+    let inv_a = 1.0 / a;
+    let ytop = -bb * s / c.sqrt();
+    let (y_right, y_left) = (ytop.clamp(lo, hi), (-ytop).clamp(lo, hi));
+    let half_width = |y: f64| (a * t - det * y * y).max(0.0).sqrt();
+    let right = (-bb * y_right + half_width(y_right)) * inv_a;
+    let left = (-bb * y_left - half_width(y_left)) * inv_a;
     // Pixel `i` has its centre at offset `i + 0.5 − mx`; a pixel of slack each way covers
     // the rounding of the offsets the pixels compute. (`max` and `min` take a NaN to the
     // box's edge.)
-    let first = (f64::from(g.mean[0]) + left - 1.5)
-        .floor()
-        .max(f64::from(b.x0));
-    let last = (f64::from(g.mean[0]) + right + 0.5)
-        .ceil()
-        .min(f64::from(b.x1));
+    let first = floor_f64(f64::from(g.mean[0]) + left - 1.5).max(f64::from(b.x0));
+    let last = ceil_f64(f64::from(g.mean[0]) + right + 0.5).min(f64::from(b.x1));
     if first > last {
         return None;
     }
