@@ -3,7 +3,7 @@
 //! Every renderer starts here, so that the clamps, the conic and the pixel box, which
 //! decide which pixels a Gaussian may touch, are computed once and the same way.
 
-use super::rounding::{ceil_f32, floor_f32};
+use super::rounding::{ceil, floor};
 use super::TILE;
 use gsi_format::contract::{
     exp, ALPHA_MAX, ALPHA_MIN, COLOR_MAX, COLUMN_BAND, COLUMN_DARK, COLUMN_START, COLUMN_STEEP,
@@ -347,8 +347,8 @@ pub fn project_scene(scene: &Scene, width: u32, height: u32) -> Vec<Projected> {
 /// range: `ceil(m - r - 0.5) ..= floor(m + r - 0.5)`, clipped. Computed in `f32` and
 /// clamped in float before the cast, so a centre far outside the image cannot overflow.
 fn pixel_span(m: f32, r: f32, n: u32) -> Option<(u32, u32)> {
-    let lo = ceil_f32(m - r - 0.5);
-    let hi = floor_f32(m + r - 0.5);
+    let lo = ceil(f64::from(m - r - 0.5)) as f32;
+    let hi = floor(f64::from(m + r - 0.5)) as f32;
     // Also rejects NaN.
     if !(lo <= hi && hi >= 0.0) {
         return None;

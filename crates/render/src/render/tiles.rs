@@ -17,7 +17,7 @@
 //! (a run has at least one slot; a single list never exceeds the number of Gaussians).
 
 use super::project::{offset, term_bound, Projected};
-use super::rounding::{ceil_f64, floor_f64};
+use super::rounding::{ceil, floor};
 use super::TILE;
 use std::ops::Range;
 
@@ -126,8 +126,8 @@ pub fn band_tiles(g: &Projected, rows: Range<u32>) -> Option<(u32, u32)> {
     // Pixel `i` has its centre at offset `i + 0.5 − mx`; a pixel of slack each way covers
     // the rounding of the offsets the pixels compute. (`max` and `min` take a NaN to the
     // box's edge.)
-    let first = floor_f64(f64::from(g.mean[0]) + left - 1.5).max(f64::from(b.x0));
-    let last = ceil_f64(f64::from(g.mean[0]) + right + 0.5).min(f64::from(b.x1));
+    let first = floor(f64::from(g.mean[0]) + left - 1.5).max(f64::from(b.x0));
+    let last = ceil(f64::from(g.mean[0]) + right + 0.5).min(f64::from(b.x1));
     if first > last {
         return None;
     }
