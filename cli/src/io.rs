@@ -41,13 +41,7 @@ pub fn write_with<E: From<io::Error>>(
         write(&mut out)?;
         return Ok(out.flush()?);
     }
-    let is_link = std::fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_symlink());
-    let resolved = if is_link {
-        std::fs::canonicalize(path).ok()
-    } else {
-        None
-    };
-    let path = resolved.as_deref().unwrap_or(path);
+    let path = &through_links(path)?;
     let tmp = temp_sibling(path);
     let result = (|| {
         // Buffered: encoders write in small pieces; large writes pass straight through.
@@ -69,6 +63,31 @@ pub fn write_with<E: From<io::Error>>(
         let _ = std::fs::remove_file(&tmp);
     }
     result
+}
+
+/// `path` with its symbolic links followed to the file they name, which need not exist
+/// yet (a dangling link is written through too, as a shell's `>` does).
+fn through_links(path: &Path) -> io::Result<PathBuf> {
+    let mut at = path.to_path_buf();
+    // As many links as Linux follows in one path.
+    for _ in 0..40 {
+        match std::fs::symlink_metadata(&at) {
+            Ok(m) if m.file_type().is_symlink() => {
+                // A relative target is relative to the link's folder; `join` keeps an
+                // absolute one as it is.
+                let target = std::fs::read_link(&at)?;
+                at = match at.parent() {
+                    Some(dir) => dir.join(target),
+                    None => target,
+                };
+            }
+            _ => return Ok(at),
+        }
+    }
+    Err(io::Error::other(format!(
+        "{}: too many levels of symbolic links",
+        path.display()
+    )))
 }
 
 /// `dir/.name.gsi-tmp-<pid>-<k>`: same folder (so the rename is atomic), hidden, unique
@@ -172,6 +191,25 @@ mod tests {
             .is_symlink());
         assert_eq!(std::fs::read(&target).unwrap(), b"new");
         assert_eq!(names(&dir), ["link.bin", "target.bin"]);
+        // A dangling link, relative, through a second link: its file is made.
+        std::os::unix::fs::symlink("made.bin", dir.join("dangling.bin")).unwrap();
+        std::os::unix::fs::symlink("dangling.bin", dir.join("twice.bin")).unwrap();
+        write_output(&dir.join("twice.bin"), b"made").unwrap();
+        assert_eq!(std::fs::read(dir.join("made.bin")).unwrap(), b"made");
+        assert_eq!(
+            names(&dir),
+            [
+                "dangling.bin",
+                "link.bin",
+                "made.bin",
+                "target.bin",
+                "twice.bin"
+            ]
+        );
+        // A loop of links is refused, and nothing is written.
+        std::os::unix::fs::symlink("loop.bin", dir.join("loop.bin")).unwrap();
+        assert!(write_output(&dir.join("loop.bin"), b"x").is_err());
+        assert_eq!(names(&dir).len(), 6);
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
