@@ -108,7 +108,7 @@ pub fn band_tiles(g: &Projected, rows: Range<u32>) -> Option<(u32, u32)> {
     // concave in `y`, greatest at `y = −B·x/C` with `x = sqrt(t·C/det)` (where
     // `∂Q/∂y = 0`); the left end mirrors it. Over the band's rows each is at its
     // extreme row clamped into them. (Written as `ymax = √A·s` and `ytop = −B·s/√C` with
-    // `s = √(t/det)`, so that one division and the square roots run side by side rather
+    // `s = √(t/det)`, so that the divisions and the square roots run side by side rather
     // than one after another: the band loop calls this for every Gaussian of every band.
     // Rounding moves these ends by ulps, far inside the pixel of slack below.)
     let s = (t / det).sqrt();
