@@ -39,11 +39,25 @@ pub struct Args {
     /// Scale factor applied to the stored size, e.g. 2 or 0.5.
     #[arg(long)]
     scale: Option<f64>,
-    /// Where to render: `auto` uses a hardware GPU when there is one (and says so when
-    /// it falls back to the CPU); `gpu` uses any adapter wgpu offers, software ones
+    /// Where to render: `auto` (as `cpu`) renders on the CPU, which finishes a decode
+    /// before a GPU would have started; `gpu` uses any adapter wgpu offers, software ones
     /// included, and fails when there is none.
     #[arg(long, value_enum, default_value_t = DeviceArg::Auto)]
     device: DeviceArg,
+}
+
+/// The GPU a decode renders on: only one asked for by `--device gpu`. Unlike a fit,
+/// whose steps repay a GPU's start-up many times over, a decode is one render: on an
+/// NVIDIA H200, `Gpu::render` of a fitted 768×512 scene of 10,000 Gaussians took 12.8 ms
+/// a call even after start-up (BENCHMARKS.md), where a whole `gsi decode` of kodim23 at
+/// 1 bpp (8,528 Gaussians) takes 24 ms of wall time on two cores, start to exit. Where
+/// there is no GPU, looking for one (wgpu asking Vulkan's drivers, a software one among
+/// them) made that decode 88 ms instead.
+fn decode_device(device: DeviceArg) -> Result<Option<gsi::gpu::Gpu>, Failure> {
+    match device {
+        DeviceArg::Gpu => device::open(device, "decoding", false),
+        DeviceArg::Auto | DeviceArg::Cpu => Ok(None),
+    }
 }
 
 /// Output size from the stored size and the requested width/height/scale.
@@ -79,7 +93,7 @@ pub fn run(args: Args) -> Result<(), Failure> {
     let h = &f.records.header;
     let (w, ht) = output_size(h.width, h.height, &args)?;
     Limits::default().check_output(w, ht)?;
-    let gpu = device::open(args.device, "decoding", false)?;
+    let gpu = decode_device(args.device)?;
     decode_file(f, &args.output, format, &args, gpu.as_ref())
 }
 
@@ -89,7 +103,7 @@ fn run_batch(args: &Args) -> Result<(), Failure> {
     let format = OutputFormat::named(ext)?;
     let files = crate::batch::expand(&args.files, &["gsi"])?;
     let jobs = crate::batch::plan(files, &args.output, ext)?;
-    let gpu = device::open(args.device, "decoding", false)?;
+    let gpu = decode_device(args.device)?;
     let parallel = crate::batch::parallel(args.jobs, gpu.is_some())?;
     let skip = |job: &crate::batch::Job| {
         let readable = !args.force && image::image_dimensions(&job.output).is_ok();
@@ -135,18 +149,7 @@ fn decode_file(
     let cpu = |scene: &gsi::Scene| render::render_rgb8(scene, w, ht, &limits);
     let rgb = match gpu {
         None => cpu(&scene)?,
-        Some(gpu) => match gpu.render(&scene, w, ht) {
-            Ok(image) => image.to_rgb8(),
-            // Too large for this adapter's buffers: `auto` falls back, `gpu` fails.
-            Err(e)
-                if e.kind() == gsi::gpu::ErrorKind::LimitExceeded
-                    && args.device == DeviceArg::Auto =>
-            {
-                eprintln!("gsi: {e}; decoding on the CPU");
-                cpu(&scene)?
-            }
-            Err(e) => return Err(e.into()),
-        },
+        Some(gpu) => gpu.render(&scene, w, ht)?.to_rgb8(),
     };
     io::write_with(output, |out| format.write(out, &rgb, w, ht)).map_err(named)
 }

@@ -250,6 +250,43 @@ fn decoding_to_dev_null_leaves_it_a_device() {
     assert!(!now.is_file(), "/dev/null is a regular file");
 }
 
+/// A decode renders on the CPU unless `--device gpu` asks for the GPU: by default it does
+/// not look for one (which costs more than the decode), and so says nothing of it. With
+/// no adapter to be had, a look would fail and say so on stderr.
+#[test]
+fn decode_looks_for_a_gpu_only_when_asked() {
+    let dir = tmp_dir("decode-device");
+    let good = corpus("valid")[0].clone();
+    let run = |device: Option<&str>, out: &str| {
+        let out = dir.join(out);
+        let mut args = vec![
+            "decode",
+            good.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+        ];
+        args.extend(device.map(|d| ["--device", d]).iter().flatten());
+        Command::new(env!("CARGO_BIN_EXE_gsi"))
+            .args(&args)
+            .env("WGPU_ADAPTER_NAME", "no-such-adapter-anywhere")
+            .output()
+            .unwrap()
+    };
+    for (device, name) in [(None, "default.png"), (Some("auto"), "auto.png")] {
+        let out = run(device, name);
+        assert!(out.status.success(), "{device:?}");
+        assert!(
+            out.stderr.is_empty(),
+            "{device:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(dir.join(name).exists());
+    }
+    assert_refused(&run(Some("gpu"), "gpu.png"), "--device gpu");
+    assert!(!dir.join("gpu.png").exists());
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
 #[test]
 fn a_failed_decode_leaves_the_output_untouched() {
     let dir = tmp_dir("atomic");
