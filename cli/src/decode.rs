@@ -146,9 +146,8 @@ fn decode_file(
     }
     // On the CPU, tiles are blended a band at a time straight into the 8-bit output: 3
     // bytes per pixel in memory, not a float image and then an 8-bit copy.
-    let cpu = |scene: &gsi::Scene| render::render_rgb8(scene, w, ht, &limits);
     let rgb = match gpu {
-        None => cpu(&scene)?,
+        None => render::render_rgb8(&scene, w, ht, &limits)?,
         Some(gpu) => gpu.render(&scene, w, ht)?.to_rgb8(),
     };
     io::write_with(output, |out| format.write(out, &rgb, w, ht)).map_err(named)
