@@ -2,14 +2,15 @@
 //!
 //! Work is split into bands of [`TILE`] pixel rows. Each band owns a contiguous slice of
 //! the output, so bands can be rendered on different threads without sharing or
-//! `unsafe`. Inside a band, a Gaussian is binned to the 16×16 tiles that its ellipse
-//! reaches over the band's rows ([`band_tiles`]); a tile visits its list in stored order
-//! and evaluates only the pixels inside both the tile and the Gaussian's box. Which thread renders a band never changes the arithmetic, so the
+//! `unsafe`. Inside a band, a Gaussian's box is cut to the columns that its ellipse
+//! reaches over the band's rows ([`band_columns`]) and the Gaussian binned to the 16×16
+//! tiles they cross; a tile visits its list in stored order and evaluates only the pixels
+//! inside both the tile and the cut box. Which thread renders a band never changes the arithmetic, so the
 //! parallel and sequential builds give identical bits.
 
 use super::lanes::{Acc, Kernel, TILE_W};
 use super::project::{Projected, Rect};
-use super::tiles::{band_tiles, runs, Bins, Span};
+use super::tiles::{band_columns, runs, Bins};
 use super::TILE;
 use gsi_format::model::{Blend, ToneCurve, WeightRule};
 use std::sync::Mutex;
@@ -397,14 +398,24 @@ impl Band<'_> {
         let row_len = self.width as usize * O::PER_PIXEL;
         let y1 = self.y0 + (rows.len() / row_len) as u32;
         let tiles_x = self.width.div_ceil(TILE);
-        let spans: Vec<Span> = list
-            .iter()
-            .filter_map(|&k| {
-                let (lo, hi) = band_tiles(&self.proj[k as usize], self.y0..y1)?;
-                Some((k, lo, hi))
-            })
-            .collect();
-        let spans = spans.iter().copied();
+        // The band's Gaussians, each with its box cut to the columns it may reach over
+        // the band's rows: the pixels cut away take no light by either weight rule, so
+        // the image is the same, and a tile spends no chunk, nor a start of the column
+        // rule, on a box's corner that the ellipse does not reach. (A copy per Gaussian
+        // and band: kodim13 and kodim23 at 1 bpp decode in 2.1 % and 1.5 % less CPU.
+        // The cut columns carried beside the Gaussians' indices instead were 10 % slower
+        // in the tile loops, whose registers then spilled.)
+        let mut local: Vec<Projected> = Vec::with_capacity(list.len());
+        local.extend(list.iter().filter_map(|&k| {
+            let g = &self.proj[k as usize];
+            let (first, last) = band_columns(g, self.y0..y1)?;
+            let mut cut = *g;
+            (cut.bbox.x0, cut.bbox.x1) = (first, last);
+            Some(cut)
+        }));
+        let spans = (0..)
+            .zip(&local)
+            .map(|(i, g)| (i, g.bbox.x0 / TILE, g.bbox.x1 / TILE));
         let mut acc = Acc::zero();
         for run in runs(spans.clone(), tiles_x, self.tile_budget) {
             tiles.fill(spans.clone(), run.clone());
@@ -421,8 +432,7 @@ impl Band<'_> {
                 acc.clear();
                 let tile = tiles.slot(tx);
                 if !tile.is_empty() {
-                    self.kernel
-                        .tile(self.blend, tile, self.proj, rect, &mut acc);
+                    self.kernel.tile(self.blend, tile, &local, rect, &mut acc);
                 }
                 if let Some(t) = self.tone {
                     acc.tone(t, rect);

@@ -67,22 +67,30 @@ fn reach(cut: f32, s: f64) -> f64 {
     -2.0 * f64::from(cut) + 1e-3 + 1e-4 * s
 }
 
-/// The tiles `(lo, hi)` (inclusive tile columns) of a band of pixel rows `rows` where `g`
-/// may reach its cut-off ([`Projected::cutoff`]): those that the ellipse `Q = −2·power ≤ t` meets within
-/// the rows of the box in the band (`t` the cut-off with the margin for rounding),
-/// widened by a pixel each way. `None` where it meets none.
-///
-/// A rotated, elongated Gaussian's box holds whole tiles that the ellipse never
-/// reaches; deciding that once per band, in closed form, costs less than a test per tile
-/// in the tile loops, and keeps those tiles' lists shorter. Only a shortcut: every pixel
-/// of a kept tile is evaluated by the rule.
+/// [`band_columns`] as tile columns `(lo, hi)` (inclusive): the tiles of the band that
+/// `g` may reach, for the tile lists of the fit and of the GPU.
+#[cfg(any(test, feature = "encode", feature = "gpu"))]
 pub fn band_tiles(g: &Projected, rows: Range<u32>) -> Option<(u32, u32)> {
+    band_columns(g, rows).map(|(first, last)| (first / TILE, last / TILE))
+}
+
+/// The pixel columns `(first, last)` (inclusive, within the box) of a band of pixel rows
+/// `rows` where `g` may reach its cut-off ([`Projected::cutoff`]) by either weight rule:
+/// those that the ellipse `Q = −2·power ≤ t` meets within the rows of the box in the band
+/// (`t` the cut-off with the margin for rounding), widened by a pixel each way; the box's
+/// own columns where the box lies within two tile columns. `None` where it meets none.
+///
+/// A rotated, elongated Gaussian's box holds whole tiles, and corners of tiles, that the
+/// ellipse never reaches; deciding that once per band, in closed form, costs less than a
+/// test per tile in the tile loops, and keeps those tiles' lists shorter. Only a
+/// shortcut: every pixel of the columns kept is evaluated by the rule.
+pub fn band_columns(g: &Projected, rows: Range<u32>) -> Option<(u32, u32)> {
     let b = &g.bbox;
     let ys = b.y0.max(rows.start)..(b.y1 + 1).min(rows.end);
     if ys.is_empty() {
         return None;
     }
-    let whole = Some((b.x0 / TILE, b.x1 / TILE));
+    let whole = Some((b.x0, b.x1));
     if b.x1 / TILE - b.x0 / TILE < 2 {
         // A box within two tile columns: the ellipse reaches both nearly always, and the
         // test would cost more than the tile it rarely saves.
@@ -131,7 +139,7 @@ pub fn band_tiles(g: &Projected, rows: Range<u32>) -> Option<(u32, u32)> {
     if first > last {
         return None;
     }
-    Some((first as u32 / TILE, last as u32 / TILE))
+    Some((first as u32, last as u32))
 }
 
 /// One item to bin: its index and the inclusive range of slots it covers.
@@ -355,7 +363,8 @@ mod tests {
         assert_eq!(b.slot(5), &[9, 4]);
     }
 
-    /// Every pixel the rule touches lies in a tile that `band_tiles` keeps for its band,
+    /// Every pixel the rule touches lies in the columns `band_columns` keeps for its band
+    /// (within the box) and in a tile `band_tiles` keeps,
     /// and the culling does cull: needle-thin rotated Gaussians, low opacities, sizes
     /// that scale the footprints up and down.
     #[test]
@@ -375,6 +384,7 @@ mod tests {
                     for band in 0..h.div_ceil(TILE) {
                         let rows = band * TILE..((band + 1) * TILE).min(h);
                         let tiles = band_tiles(g, rows.clone());
+                        let columns = band_columns(g, rows.clone());
                         if g.bbox.y0 < rows.end && rows.start <= g.bbox.y1 {
                             boxed += g.bbox.x1 / TILE - g.bbox.x0 / TILE + 1;
                             kept += tiles.map_or(0, |(lo, hi)| hi - lo + 1);
@@ -384,6 +394,9 @@ mod tests {
                                 if g.alpha_at(i, j, Blend::Sum).is_some() {
                                     let (lo, hi) = tiles.expect("band of a touched pixel");
                                     assert!((lo..=hi).contains(&(i / TILE)), "{g:?} {i} {j}");
+                                    let (first, last) = columns.expect("band of a touched pixel");
+                                    assert!((first..=last).contains(&i), "{g:?} {i} {j}");
+                                    assert!(g.bbox.x0 <= first && last <= g.bbox.x1);
                                 }
                             }
                         }
