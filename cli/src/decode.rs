@@ -39,9 +39,9 @@ pub struct Args {
     /// Scale factor applied to the stored size, e.g. 2 or 0.5.
     #[arg(long)]
     scale: Option<f64>,
-    /// Where to render: `auto` (as `cpu`) renders on the CPU, which finishes a decode
-    /// before a GPU would have started; `gpu` uses any adapter wgpu offers, software ones
-    /// included, and fails when there is none.
+    /// Where to render: `auto` (as `cpu`) renders on the CPU, which rendered one image
+    /// faster than a GPU did even once started (BENCHMARKS.md); `gpu` uses any adapter
+    /// wgpu offers, software ones included, and fails when there is none.
     #[arg(long, value_enum, default_value_t = DeviceArg::Auto)]
     device: DeviceArg,
 }
@@ -49,10 +49,10 @@ pub struct Args {
 /// The GPU a decode renders on: only one asked for by `--device gpu`. Unlike a fit,
 /// whose steps repay a GPU's start-up many times over, a decode is one render: on an
 /// NVIDIA H200, `Gpu::render` of a fitted 768×512 scene of 10,000 Gaussians took 12.8 ms
-/// a call even after start-up (BENCHMARKS.md), where a whole `gsi decode` of kodim23 at
-/// 1 bpp (8,528 Gaussians) takes 24 ms of wall time on two cores, start to exit. Where
-/// there is no GPU, looking for one (wgpu asking Vulkan's drivers, a software one among
-/// them) made that decode 88 ms instead.
+/// a call even after start-up (BENCHMARKS.md), where two cores of the development
+/// machine render kodim23 at 1 bpp (8,528 Gaussians, the same size) in about 7 ms, and
+/// the whole `gsi decode`, start to exit, takes 24 ms. Where there is no GPU, looking for
+/// one (wgpu asking Vulkan's drivers, a software one among them) made that decode 88 ms.
 fn decode_device(device: DeviceArg) -> Result<Option<gsi::gpu::Gpu>, Failure> {
     match device {
         DeviceArg::Gpu => device::open(device, "decoding", false),
