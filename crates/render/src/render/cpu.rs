@@ -5,8 +5,8 @@
 //! `unsafe`. Inside a band, a Gaussian's box is cut to the columns that its ellipse
 //! reaches over the band's rows ([`band_columns`]) and the Gaussian binned to the 16×16
 //! tiles they cross; a tile visits its list in stored order and evaluates only the pixels
-//! inside both the tile and the cut box. Which thread renders a band never changes the arithmetic, so the
-//! parallel and sequential builds give identical bits.
+//! inside both the tile and the cut box. Which thread renders a band never changes the
+//! arithmetic, so the parallel and sequential builds give identical bits.
 
 use super::lanes::{Acc, Kernel, TILE_W};
 use super::project::{Projected, Rect};
