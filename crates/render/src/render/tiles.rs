@@ -364,9 +364,9 @@ mod tests {
     }
 
     /// Every pixel the rule touches lies in the columns `band_columns` keeps for its band
-    /// (within the box) and in a tile `band_tiles` keeps,
-    /// and the culling does cull: needle-thin rotated Gaussians, low opacities, sizes
-    /// that scale the footprints up and down.
+    /// (within the box) and in a tile `band_tiles` keeps, and the culling does cull:
+    /// needle-thin rotated Gaussians, low opacities, sizes that scale the footprints up
+    /// and down.
     #[test]
     fn band_culling_keeps_every_touched_tile() {
         for (seed, cov_param, with_opacity) in [
