@@ -39,20 +39,20 @@ pub struct Args {
     /// Scale factor applied to the stored size, e.g. 2 or 0.5.
     #[arg(long)]
     scale: Option<f64>,
-    /// Where to render: `auto` (as `cpu`) renders on the CPU, which rendered one image
-    /// faster than a GPU did even once started (BENCHMARKS.md); `gpu` uses any adapter
-    /// wgpu offers, software ones included, and fails when there is none.
+    /// Where to render: `auto` (as `cpu`) renders on the CPU, which decoded an image
+    /// many times faster than a GPU with its start-up (BENCHMARKS.md); `gpu` uses any
+    /// adapter wgpu offers, software ones included, and fails when there is none.
     #[arg(long, value_enum, default_value_t = DeviceArg::Auto)]
     device: DeviceArg,
 }
 
 /// The GPU a decode renders on: only one asked for by `--device gpu`. Unlike a fit,
-/// whose steps repay a GPU's start-up many times over, a decode is one render: on an
-/// NVIDIA H200, `Gpu::render` of a fitted 768×512 scene of 10,000 Gaussians took 12.8 ms
-/// a call even after start-up (BENCHMARKS.md), where two cores of the development
-/// machine render kodim23 at 1 bpp (8,528 Gaussians, the same size) in about 7 ms, and
-/// the whole `gsi decode`, start to exit, takes 24 ms. Where there is no GPU, looking for
-/// one (wgpu asking Vulkan's drivers, a software one among them) made that decode 88 ms.
+/// whose steps repay a GPU's start-up many times over, a decode is one render, and the
+/// start-up costs more than the render: on a machine with an NVIDIA H200 and 16 cores, a
+/// whole `gsi decode` of kodim23 at 1 bpp took 271 ms with `--device gpu` against 15 ms
+/// with `--device cpu`, and 633 ms against 72 ms at 4243×2829 (BENCHMARKS.md). Where there
+/// is no GPU, looking for one (wgpu asking Vulkan's drivers, a software one among them)
+/// made the development machine's 24 ms decode 88 ms.
 fn decode_device(device: DeviceArg) -> Result<Option<gsi::gpu::Gpu>, Failure> {
     match device {
         DeviceArg::Gpu => device::open(device, "decoding", false),
