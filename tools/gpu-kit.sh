@@ -18,6 +18,13 @@
 #
 # does the same here, on whatever adapter wgpu finds (lavapipe in CI's image) and with
 # `--quick` for the benchmark: the whole report of a GPU run, with software figures.
+#
+# Built with `KIT_CLI=1`, the kit also holds what `tools/cli_times.py` needs to time
+# whole `gsi decode`, `encode` and `enhance` processes on the GPU, on all the machine's
+# cores and on two (kodim23 stored at 1 bpp, four Kodak images, two LOL `val30` low
+# images and a 4 MP dark photograph: the synthetic set's kodim05 enlarged, which needs
+# `cargo run --release --example lowlight_set` first and Pillow); `--run` then ends with
+# those times (`cli.json`), and `--cli` runs them alone.
 set -eu
 cd "$(dirname "$0")/.."
 kit=.gpukit
@@ -26,9 +33,6 @@ run_kit() {
     out="${OUT:-target/gpukit}"
     mkdir -p "$out"
     export GSI_REQUIRE_GPU=1 GSI_REPO="$PWD" GSI_BIN="$PWD/$kit/gsi"
-    # The commit the kit was built from, for gpu.json.
-    [ -f "$kit/COMMIT" ] && GSI_COMMIT="$(cat "$kit/COMMIT")" && export GSI_COMMIT
-    export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-$(mktemp -d)}"
     status=0
     # The CLI's GPU tests, then each crate's unit tests of its GPU twins (filtered to
     # them: the rest of those binaries are CPU tests that CI runs).
@@ -57,8 +61,21 @@ run_kit() {
     return $status
 }
 
-case "${1:-}" in
---run)
+# Whole `gsi` processes on each device (`tools/cli_times.py`), from the kit's `cli/`.
+run_cli() {
+    out="${OUT:-target/gpukit}"
+    mkdir -p "$out"
+    echo "==> cli_times"
+    c="$kit/cli"
+    python3 tools/cli_times.py --gsi "$kit/gsi" --out "$out/cli.json" \
+        --decode "$c/kodim23.gsi" --decode "$c/kodim23.gsi:--width,4243" \
+        --encode "$kit/kodak/kodim01.png:1" --encode "$kit/kodak/kodim02.png:1" \
+        --encode "$kit/kodak/kodim03.png:1" --encode "$kit/kodak/kodim04.png:1" \
+        --enhance "$c/119.png:1.1" --enhance "$c/604.png:1.1" --enhance "$c/dark4mp.png:1.1"
+}
+
+# The loader and NVIDIA's Vulkan driver, on a machine that has only the driver's files.
+setup_gl() {
     for f in "$kit"/gl/*.deb; do dpkg -x "$f" /; done
     ldconfig
     if [ -f /usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json ]; then
@@ -69,7 +86,31 @@ case "${1:-}" in
     fi
     nvidia-smi --query-gpu=name,driver_version --format=csv,noheader || true
     export WGPU_BACKEND=vulkan
-    run_kit
+}
+
+case "${1:-}" in
+--run | --cli | --dry-run)
+    export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-$(mktemp -d)}"
+    # The commit the kit was built from, for gpu.json and cli.json.
+    if [ -f "$kit/COMMIT" ]; then
+        GSI_COMMIT="$(cat "$kit/COMMIT")"
+        export GSI_COMMIT
+    fi
+    ;;
+esac
+case "${1:-}" in
+--run)
+    setup_gl
+    status=0
+    run_kit || status=1
+    if [ -d "$kit/cli" ]; then
+        run_cli || status=1
+    fi
+    exit $status
+    ;;
+--cli)
+    setup_gl
+    run_cli
     exit $?
     ;;
 --dry-run)
@@ -108,6 +149,16 @@ if [ "${KIT_KODAK:-}" = all ]; then
     cp ../shared/data/kodak/*.png "$kit/kodak/"
 else
     cp ../shared/data/kodak/kodim0[1-4].png "$kit/kodak/"
+fi
+rm -rf "$kit/cli"
+if [ "${KIT_CLI:-}" = 1 ]; then
+    mkdir -p "$kit/cli"
+    target/release/gsi encode ../shared/data/kodak/kodim23.png -o "$kit/cli/kodim23.gsi" \
+        --bpp 1 --device cpu --quiet
+    cp ../shared/data/LOL/val30/low/119.png ../shared/data/LOL/val30/low/604.png "$kit/cli/"
+    python3 -c 'import sys; from PIL import Image
+Image.open(sys.argv[1]).convert("RGB").resize((2304, 1728), Image.LANCZOS).save(sys.argv[2])' \
+        target/kodak-lowlight/low/kodim05.png "$kit/cli/dark4mp.png"
 fi
 o='-oAPT::Architecture=amd64 -oAPT::Architectures=amd64 -oDir::State::Lists=/tmp/gsi-apt'
 # shellcheck disable=SC2086

@@ -49,8 +49,8 @@ pub struct Args {
 /// The GPU a decode renders on: only one asked for by `--device gpu`. Unlike a fit,
 /// whose steps repay a GPU's start-up many times over, a decode is one render, and the
 /// start-up costs more than the render: on a machine with an NVIDIA H200 and 16 cores, a
-/// whole `gsi decode` of kodim23 at 1 bpp took 271 ms with `--device gpu` against 15 ms
-/// with `--device cpu`, and 633 ms against 72 ms at 4243×2829 (BENCHMARKS.md). Where there
+/// whole `gsi decode` of kodim23 at 1 bpp took 267 ms with `--device gpu` against 14 ms
+/// with `--device cpu`, and 599 ms against 70 ms at 4243×2829 (BENCHMARKS.md). Where there
 /// is no GPU, looking for one (wgpu asking Vulkan's drivers, a software one among them)
 /// made the development machine's 24 ms decode 88 ms.
 fn decode_device(device: DeviceArg) -> Result<Option<gsi::gpu::Gpu>, Failure> {
