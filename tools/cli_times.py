@@ -20,23 +20,18 @@ import argparse
 import json
 import os
 import statistics
-import subprocess
 import tempfile
-import time
+
+from decode_speed import run_process
 
 
 def run(cmd, device):
     """Run `cmd` with `--device`, return (wall s, CPU s, last line of its output)."""
     pin = ["taskset", "-c", "0,1"] if device == "cpu2" else []
     dev = "cpu" if device == "cpu2" else device
-    start = time.monotonic()
-    p = subprocess.Popen(pin + cmd + ["--device", dev], stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
-    out = p.stdout.read().decode(errors="replace").strip()
-    _, status, usage = os.wait4(p.pid, 0)
-    wall = time.monotonic() - start
-    if status != 0:
-        raise SystemExit(f"{' '.join(cmd)} --device {dev} failed:\n{out}")
-    return wall, usage.ru_utime + usage.ru_stime, out.splitlines()[-1] if out else ""
+    cpu, wall, out = run_process(pin + cmd + ["--device", dev])
+    out = out.strip()
+    return wall, cpu, out.splitlines()[-1] if out else ""
 
 
 def split(spec):

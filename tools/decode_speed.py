@@ -30,17 +30,24 @@ import tempfile
 import time
 
 
-def run_timed(cmd):
-    """(cpu seconds, wall seconds) of one process, its output discarded."""
+def run_process(cmd):
+    """(cpu seconds, wall seconds, what it printed on stdout and stderr) of one process,
+    CPU time from the OS's accounting of the finished process; exits where it fails."""
     t0 = time.monotonic()
-    p = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    out = p.stdout.read().decode(errors="replace")
+    p.stdout.close()
     _, status, usage = os.wait4(p.pid, 0)
     wall = time.monotonic() - t0
-    err = p.stderr.read().decode(errors="replace")
-    p.stderr.close()
     if os.waitstatus_to_exitcode(status) != 0:
-        sys.exit(f"{cmd[0]} failed: {err}")
-    return usage.ru_utime + usage.ru_stime, wall
+        sys.exit(f"{' '.join(cmd)} failed: {out}")
+    return usage.ru_utime + usage.ru_stime, wall, out
+
+
+def run_timed(cmd):
+    """(cpu seconds, wall seconds) of one process, its output discarded."""
+    cpu, wall, _ = run_process(cmd)
+    return cpu, wall
 
 
 def best_under(make, budget, qualities):

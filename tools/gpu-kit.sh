@@ -30,8 +30,6 @@ cd "$(dirname "$0")/.."
 kit=.gpukit
 
 run_kit() {
-    out="${OUT:-target/gpukit}"
-    mkdir -p "$out"
     export GSI_REQUIRE_GPU=1 GSI_REPO="$PWD" GSI_BIN="$PWD/$kit/gsi"
     status=0
     # The CLI's GPU tests, then each crate's unit tests of its GPU twins (filtered to
@@ -63,8 +61,6 @@ run_kit() {
 
 # Whole `gsi` processes on each device (`tools/cli_times.py`), from the kit's `cli/`.
 run_cli() {
-    out="${OUT:-target/gpukit}"
-    mkdir -p "$out"
     echo "==> cli_times"
     c="$kit/cli"
     python3 tools/cli_times.py --gsi "$kit/gsi" --out "$out/cli.json" \
@@ -90,6 +86,9 @@ setup_gl() {
 
 case "${1:-}" in
 --run | --cli | --dry-run)
+    # Where the logs and JSON go.
+    out="${OUT:-target/gpukit}"
+    mkdir -p "$out"
     export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-$(mktemp -d)}"
     # The commit the kit was built from, for gpu.json and cli.json.
     if [ -f "$kit/COMMIT" ]; then
