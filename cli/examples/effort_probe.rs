@@ -11,7 +11,8 @@
 //! were checked, BENCHMARKS.md, learning rates for short fits). `GSI_PROBE_CURVE=1` prints every progress
 //! report (step, Gaussians, PSNR, seconds since the start), to see where a fit's time goes.
 //! `GSI_PROBE_STORED=0` leaves the stored colours as the last step left them (no final
-//! colour solve, as the effort report's reference). `GSI_PROBE_BITS=C,A,K` sets the
+//! colour solve, as the effort report's reference); `GSI_PROBE_COMPENSATE=0` rounds each
+//! stored colour to its nearest code alone. `GSI_PROBE_BITS=C,A,K` sets the
 //! covariance, angle and colour depths (the position's stays the default for the size);
 //! `GSI_PROBE_BPP=B` the budget (default 1); `GSI_PROBE_BLEND=alpha` fits in `alpha` mode.
 
@@ -54,6 +55,7 @@ fn main() {
         color_solve: number(3) as u32,
         lab: gsi::fit::Lab {
             solve_stored_colors: std::env::var("GSI_PROBE_STORED").map_or(true, |v| v != "0"),
+            compensate_rounding: std::env::var("GSI_PROBE_COMPENSATE").map_or(true, |v| v != "0"),
             ..Default::default()
         },
         blend: match std::env::var("GSI_PROBE_BLEND").as_deref() {
