@@ -751,19 +751,16 @@ fn solve_scene_colors(scene: &mut Scene, target: &[f32], iterations: usize) {
 /// its budget and kept the plain rounding) and 16 of 3 (60) +0.10.
 const ROUNDING: (usize, usize) = (8, 3);
 
-/// The colour codes of `scene` (colours solved for its geometry) at `bits` per component,
-/// over the range of its colours: with `compensate`, rounded a batch at a time
-/// ([`lsq::quantize_colors`]), else each to its nearest code.
-fn quantize_stored_colors(scene: &Scene, target: &[f32], bits: u8, compensate: bool) -> Attribute {
-    let mut out = Attribute::fit(&scene.gaussians.colors, [bits; 3]);
-    if !compensate {
-        return out;
-    }
-    let qs = std::array::from_fn(|c| out.quantizers[c]);
+/// The codes `nearest` (each colour of `scene`, solved for its geometry, rounded to its
+/// nearest code) rounded instead a batch at a time ([`lsq::quantize_colors`]), over the
+/// same quantizers.
+fn compensated_colors(scene: &Scene, target: &[f32], nearest: &Attribute) -> Attribute {
+    let qs = std::array::from_fn(|c| nearest.quantizers[c]);
     let (w, h) = (scene.width, scene.height);
     let mut projected = project_scene(scene, w, h);
     let codes = lsq::quantize_colors(&mut projected, scene.blend, (w, h), target, &qs, ROUNDING);
     // A Gaussian that touches no pixel keeps its nearest code.
+    let mut out = nearest.clone();
     let n = scene.gaussians.len();
     for (g, c) in projected.iter().zip(codes) {
         for (ch, code) in c.into_iter().enumerate() {
@@ -1274,13 +1271,19 @@ fn finish(
         let mut stored = records.to_scene();
         stored.gaussians.colors = std::mem::take(&mut scene.gaussians.colors);
         solve_scene_colors(&mut stored, &t.data, 2 * opts.color_solve as usize);
-        let compensate = opts.lab().compensate_rounding;
-        if compensate && matches!(opts.budget, Budget::Bpp(_)) {
-            let mut alone = records.clone();
-            alone.colors = quantize_stored_colors(&stored, &t.data, bits.color, false);
-            plain = Some(alone);
-        }
-        records.colors = quantize_stored_colors(&stored, &t.data, bits.color, compensate);
+        let nearest = Attribute::fit(&stored.gaussians.colors, [bits.color; 3]);
+        records.colors = if opts.lab().compensate_rounding {
+            let compensated = compensated_colors(&stored, &t.data, &nearest);
+            if matches!(opts.budget, Budget::Bpp(_)) {
+                plain = Some(Records {
+                    colors: nearest,
+                    ..records.clone()
+                });
+            }
+            compensated
+        } else {
+            nearest
+        };
     }
     let written = stored_file(records, bits, opts, t, gain, float_psnr)?;
     // Compensated codes take a few more bytes (0.07–0.2 % on average over the validation
