@@ -12,11 +12,13 @@
 //! report (step, Gaussians, PSNR, seconds since the start), to see where a fit's time goes.
 //! `GSI_PROBE_STORED=0` leaves the stored colours as the last step left them (no final
 //! colour solve, as the effort report's reference); `GSI_PROBE_COMPENSATE=0` rounds each
-//! stored colour to its nearest code alone. `GSI_PROBE_BITS=C,A,K` sets the
-//! covariance, angle and colour depths (the position's stays the default for the size);
-//! `GSI_PROBE_BPP=B` the budget (default 1); `GSI_PROBE_BLEND=alpha` fits in `alpha` mode.
+//! stored colour to its nearest code alone; `GSI_PROBE_QAT=F` spends the last `F` of the
+//! steps on quantization-aware fine-tuning (default: the encoder's). `GSI_PROBE_BITS=C,A,K`
+//! sets the covariance, angle and colour depths (the position's stays the default for the
+//! size); `GSI_PROBE_BPP=B` the budget (default 1); `GSI_PROBE_BLEND=alpha` fits in `alpha`
+//! mode.
 
-use gsi::fit::{default_bits, encode, Budget, Coarse, EncodeOptions, Target};
+use gsi::fit::{default_bits, encode, Budget, Coarse, EncodeOptions, Lab, Target};
 use std::time::Instant;
 
 fn main() {
@@ -53,9 +55,13 @@ fn main() {
         iterations: number(0) as u32,
         coarse: (fraction > 0.0 && factor > 1).then_some(Coarse { factor, fraction }),
         color_solve: number(3) as u32,
-        lab: gsi::fit::Lab {
+        lab: Lab {
             solve_stored_colors: std::env::var("GSI_PROBE_STORED").map_or(true, |v| v != "0"),
             compensate_rounding: std::env::var("GSI_PROBE_COMPENSATE").map_or(true, |v| v != "0"),
+            qat_fraction: std::env::var("GSI_PROBE_QAT").map_or(Lab::default().qat_fraction, |v| {
+                v.parse()
+                    .unwrap_or_else(|_| panic!("GSI_PROBE_QAT={v} is not a number"))
+            }),
             ..Default::default()
         },
         blend: match std::env::var("GSI_PROBE_BLEND").as_deref() {

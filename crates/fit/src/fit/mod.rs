@@ -108,7 +108,9 @@ pub struct EncodeOptions {
 /// all of them unless an experiment says otherwise.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Lab {
-    /// Fraction of the iterations spent on quantization-aware fine-tuning (0.2).
+    /// Fraction of the iterations spent on quantization-aware fine-tuning (0.2: 0.1 and
+    /// 0.35 scored 0.03–0.05 dB lower on photos12 and eval15's normal-light images at 1
+    /// bpp).
     pub qat_fraction: f32,
     /// Prune and re-place Gaussians during fitting.
     pub densify: bool,
