@@ -130,13 +130,7 @@ impl<'t> Normal<'t> {
             }
             restrict(&mut q);
             let pq = dot(&p, &q);
-            let alpha: [f32; 3] = std::array::from_fn(|ch| {
-                if pq[ch] > 0.0 {
-                    (rr[ch] / pq[ch]) as f32
-                } else {
-                    0.0
-                }
-            });
+            let alpha = ratio(rr, pq);
             for ((xk, rk), (pk, qk)) in x.iter_mut().zip(r.iter_mut()).zip(p.iter().zip(&q)) {
                 for ch in 0..3 {
                     xk[ch] += alpha[ch] * pk[ch];
@@ -144,13 +138,7 @@ impl<'t> Normal<'t> {
                 }
             }
             let rr_new = dot(&r, &r);
-            let beta: [f32; 3] = std::array::from_fn(|ch| {
-                if rr[ch] > 0.0 {
-                    (rr_new[ch] / rr[ch]) as f32
-                } else {
-                    0.0
-                }
-            });
+            let beta = ratio(rr_new, rr);
             for (pk, rk) in p.iter_mut().zip(&r) {
                 for ch in 0..3 {
                     pk[ch] = rk[ch] + beta[ch] * pk[ch];
@@ -159,6 +147,18 @@ impl<'t> Normal<'t> {
             rr = rr_new;
         }
     }
+}
+
+/// `num / den` per channel, 0 where `den` is not positive (a direction the CG step
+/// cannot move along).
+fn ratio(num: [f64; 3], den: [f64; 3]) -> [f32; 3] {
+    std::array::from_fn(|ch| {
+        if den[ch] > 0.0 {
+            (num[ch] / den[ch]) as f32
+        } else {
+            0.0
+        }
+    })
 }
 
 /// Solve for the colours of `projected` (written into their `color`) that best

@@ -5,7 +5,7 @@ use super::raster::{backward, forward, Need};
 use super::{Coarse, Effort, EncodeOptions};
 use gsi_format::model::{Blend, CovParam, GaussianSet, Scene};
 use gsi_optim::optim::zeros_like as zero_grads;
-use gsi_render::render::{project_scene, render};
+use gsi_render::render::{project_scene, render, Projected};
 use gsi_synth::{random_scene, SceneSpec, SplitMix64};
 
 /// Every angle lands within a quarter turn of 0 and the covariance stays what it was
@@ -316,16 +316,19 @@ fn compensated_rounding_beats_rounding_alone() {
         let solved = super::lsq::solve_colors(&mut projected, blend, 48, 40, &target.data, 100);
         let qs: [Quantizer; 3] =
             std::array::from_fn(|c| Quantizer::fit(5, solved.iter().map(|x| x[c])));
+        let sse = |p: &[Projected]| -> f64 {
+            let img = forward(p, blend, 48, 40).image;
+            img.iter()
+                .zip(&target.data)
+                .map(|(a, b)| f64::from(a - b).powi(2))
+                .sum()
+        };
         let error = |codes: &[[u32; 3]]| -> f64 {
             let mut p = projected.clone();
             for (g, c) in p.iter_mut().zip(codes) {
                 g.color = std::array::from_fn(|ch| qs[ch].dequantize(c[ch]));
             }
-            let img = forward(&p, blend, 48, 40).image;
-            img.iter()
-                .zip(&target.data)
-                .map(|(a, b)| f64::from(a - b).powi(2))
-                .sum()
+            sse(&p)
         };
         let plain: Vec<[u32; 3]> = solved
             .iter()
@@ -352,13 +355,7 @@ fn compensated_rounding_beats_rounding_alone() {
             .iter()
             .all(|c| (0..3).all(|ch| c[ch] <= qs[ch].max_code())));
         // What rounding adds to the solved colours' error, each way.
-        let e_solved = {
-            let img = forward(&projected, blend, 48, 40).image;
-            img.iter()
-                .zip(&target.data)
-                .map(|(a, b)| f64::from(a - b).powi(2))
-                .sum::<f64>()
-        };
+        let e_solved = sse(&projected);
         let (e_plain, e_comp) = (error(&plain) - e_solved, error(&compensated) - e_solved);
         assert!(
             e_plain > 0.0 && e_comp < 0.6 * e_plain,
