@@ -80,9 +80,11 @@ fn output_size(w: u32, h: u32, args: &Args) -> Result<(u32, u32), Failure> {
 }
 
 pub fn run(args: Args) -> Result<(), Failure> {
+    keep_freed_memory();
     if crate::batch::is_batch(&args.files, Some(&args.output)) {
         return run_batch(&args);
     }
+    render_on_this_thread_too();
     // Input and output are checked before any rendering (or GPU start-up).
     let format = match &args.format {
         Some(f) => OutputFormat::named(f)?,
@@ -95,6 +97,40 @@ pub fn run(args: Args) -> Result<(), Failure> {
     Limits::default().check_output(w, ht)?;
     let gpu = decode_device(args.device)?;
     decode_file(f, &args.output, format, &args, gpu.as_ref())
+}
+
+/// Have glibc's `malloc` reuse freed memory rather than unmap it. By default each block of
+/// 128 KiB or more gets a mapping of its own, unmapped when freed, and a free top of the
+/// heap over 128 KiB is given back: a decode's arrays (codes, dequantized attributes,
+/// projected Gaussians, the window of rows) are of that size, so each was faulted in
+/// afresh, a page at a time (2–3 µs a page on the virtual machine measured), even where
+/// an array freed before it could have held it. Raised for the decode, a process that
+/// lives for one file or a batch of them, the freed pages are reused; kodim23 to PPM took
+/// 0.3–0.5 ms less CPU (101 paired processes). The library leaves the process's
+/// allocator alone; this is the program's choice.
+fn keep_freed_memory() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: `mallopt` sets parameters of the allocator, which it applies under its own
+    // lock; it is called before any thread of this process is started.
+    unsafe {
+        // 32 MiB, glibc's largest mapping threshold on 64-bit targets; a larger block
+        // (a whole 12 MP image) still gets its own mapping.
+        libc::mallopt(libc::M_MMAP_THRESHOLD, 32 << 20);
+        libc::mallopt(libc::M_TRIM_THRESHOLD, 128 << 20);
+    }
+}
+
+/// Make this thread one of the render's threads (the first of rayon's global pool, whose
+/// size is as rayon's default), rather than one that hands each step of the render to
+/// the pool and sleeps until it is done: one thread fewer to start, and no hand-over and
+/// wake-up per step. kodim23 to PPM: 0.3 ms less CPU and 0.5 ms less wall time (101
+/// paired processes). Not for a batch, whose files are decoded on threads of their own
+/// while this one only waits for them.
+fn render_on_this_thread_too() {
+    // An error means that the pool exists already, as it is: nothing to do.
+    let _ = rayon::ThreadPoolBuilder::new()
+        .use_current_thread()
+        .build_global();
 }
 
 /// `gsi decode` of many files into the folder `args.output`.
@@ -130,6 +166,8 @@ fn decode_file(
     let limits = Limits::default();
     limits.check_output(w, ht)?;
     let scene = f.records.to_scene();
+    // The codes are not needed once dequantized: freed, the render reuses their pages.
+    drop(f);
     let named = |Failure(e)| Failure(format!("{}: {e}", output.display()));
     if gpu.is_none() && format == OutputFormat::Pnm {
         // A PPM is its header and then its rows, written a window at a time as they are
@@ -138,7 +176,7 @@ fn decode_file(
         // `image` crate's settings, measured 4–10 % slower.)
         return io::write_with(output, |out| -> Result<(), Failure> {
             out.write_all(&ppm_header(w, ht))?;
-            Ok(render::render_rgb8_rows(&scene, w, ht, &limits, |rows| {
+            Ok(render::render_rgb8_rows(scene, w, ht, &limits, |rows| {
                 out.write_all(rows)
             })?)
         })

@@ -41,6 +41,7 @@ pub use tiles::TileLists;
 
 use gsi_format::format::{Error, ErrorKind, Limits, Result};
 use gsi_format::model::Scene;
+use std::borrow::Borrow;
 
 /// Side of a square tile, in pixels.
 pub const TILE: u32 = 16;
@@ -242,6 +243,10 @@ pub fn render_as<O: cpu::Output>(
 /// `limits` as [`render_rgb8`] is; the first error `sink` returns stops the render and
 /// comes back as an [`ErrorKind::Io`] error.
 ///
+/// `scene` may be given by value (or as `&Scene`): owned, it is freed once projected, so
+/// that the rows rendered at a time reuse its memory rather than fault in fresh pages
+/// (a decode's dequantized attributes are about as large as its window).
+///
 /// ```
 /// # use gsi_format::model::Blend;
 /// # let scene = gsi_synth::random_scene(1, gsi_synth::SceneSpec::new(64, 48, 50, Blend::Sum));
@@ -255,7 +260,7 @@ pub fn render_as<O: cpu::Output>(
 /// # Ok::<(), gsi_format::format::Error>(())
 /// ```
 pub fn render_rgb8_rows(
-    scene: &Scene,
+    scene: impl Borrow<Scene>,
     width: u32,
     height: u32,
     limits: &Limits,
@@ -267,12 +272,20 @@ pub fn render_rgb8_rows(
     let bands = cpu::window_bands(parallel).min(height.div_ceil(TILE) as usize);
     let window_len = row * TILE.min(height) as usize * bands;
     limits.check_alloc(window_len as u64, "the rows rendered at a time")?;
-    let projected = checked_projection(scene, width, height, limits)?;
+    let projected = checked_projection(scene.borrow(), width, height, limits)?;
+    let Scene {
+        blend,
+        weights,
+        tone,
+        ..
+    } = scene.borrow();
+    let (blend, weights, tone) = (*blend, *weights, tone.clone());
+    drop(scene);
     let mut window = vec![0u8; window_len];
     cpu::render_projected_rows::<cpu::Rgb8>(
         &projected,
-        (scene.blend, scene.weights),
-        scene.tone.as_ref(),
+        (blend, weights),
+        tone.as_ref(),
         (width, height),
         &mut window,
         parallel,
@@ -346,8 +359,8 @@ mod tests {
     }
 
     /// Rows handed out a window at a time are the bytes of the whole-image render, for
-    /// heights within one window, over several, and not a multiple of a band; a sink's
-    /// error ends the render and comes back.
+    /// heights within one window, over several, and not a multiple of a band, and with
+    /// the scene given by value; a sink's error ends the render and comes back.
     #[test]
     fn rows_in_windows_are_the_whole_image() {
         use gsi_format::model::{Blend, WeightRule};
@@ -375,6 +388,14 @@ mod tests {
                     let bands = cpu::window_bands(cfg!(feature = "parallel"));
                     assert_eq!(steps, (h as usize).div_ceil(TILE as usize * bands));
                 }
+                // Given by value (freed once projected): the same rows.
+                let mut owned = Vec::new();
+                render_rgb8_rows(scene.clone(), 37, 300, &Limits::default(), |step| {
+                    owned.extend_from_slice(step);
+                    Ok(())
+                })
+                .unwrap();
+                assert!(owned == render_rgb8(&scene, 37, 300, &Limits::default()).unwrap());
                 let mut calls = 0;
                 let err = render_rgb8_rows(&scene, 40, 400, &Limits::default(), |_| {
                     calls += 1;
