@@ -369,14 +369,18 @@ fn thread_slot() -> usize {
     0
 }
 
-/// Bands [`render_projected_rows`] takes a step at a time: four per thread, so that the
+/// Bands [`render_projected_rows`] takes a step at a time: six per thread, so that the
 /// threads share a step's uneven bands, and the window stays small (a 768-pixel-wide
-/// output on two threads: 128 rows, 288 KiB). Each step ends with the threads waiting
-/// while the rows are written: on two cores two bands per thread cost kodim23's decode
-/// 1.0 ms more CPU than four, and eight cost 0.2 ms more than four, their larger window
-/// faulting in more pages.
+/// output on two threads: 192 rows, 432 KiB). Each step ends with the threads waiting
+/// while the rows are written, so fewer steps cost less, until the window outgrows the
+/// memory a decode has freed by then (its codes and dequantized attributes) and faults
+/// in fresh pages. On two cores, `gsi decode` to PPM (61–101 paired processes): six
+/// against four, 0.6–0.7 ms less CPU for kodim23, kodim13 and Barbara (768×512 and
+/// 720×576), 0.7–1.1 ms for a 1024×768 photograph, the same at 12 MP; eight against
+/// four, 0.1–0.25 ms less for kodim23 (108 more page faults), 0.7 ms for the 1024×768
+/// one. (Two against four cost 1.0 ms more, measured before the freed memory was reused.)
 pub fn window_bands(parallel: bool) -> usize {
-    (4 * threads(parallel)).min(32)
+    (6 * threads(parallel)).min(32)
 }
 
 /// What every tile of one band needs to know.

@@ -237,7 +237,7 @@ pub fn render_as<O: cpu::Output>(
 }
 
 /// 8-bit RGB of `scene` at `width × height`, handed to `sink` in steps of whole rows, top
-/// to bottom (four bands of [`TILE`] rows a step per thread, at most 512 rows): the bytes
+/// to bottom (six bands of [`TILE`] rows a step per thread, at most 512 rows): the bytes
 /// [`render_rgb8`] gives, in memory that does not grow with the output, so that a decode
 /// written out as it is rendered (a PPM, say) never holds the whole image. Refused over
 /// `limits` as [`render_rgb8`] is; the first error `sink` returns stops the render and
