@@ -272,14 +272,9 @@ pub fn render_rgb8_rows(
     let bands = cpu::window_bands(parallel).min(height.div_ceil(TILE) as usize);
     let window_len = row * TILE.min(height) as usize * bands;
     limits.check_alloc(window_len as u64, "the rows rendered at a time")?;
-    let projected = checked_projection(scene.borrow(), width, height, limits)?;
-    let Scene {
-        blend,
-        weights,
-        tone,
-        ..
-    } = scene.borrow();
-    let (blend, weights, tone) = (*blend, *weights, tone.clone());
+    let s = scene.borrow();
+    let projected = checked_projection(s, width, height, limits)?;
+    let (blend, weights, tone) = (s.blend, s.weights, s.tone.clone());
     drop(scene);
     let mut window = vec![0u8; window_len];
     cpu::render_projected_rows::<cpu::Rgb8>(
