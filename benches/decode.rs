@@ -58,9 +58,9 @@ fn render_cpu(c: &mut Criterion) {
     group.finish();
 }
 
-/// The two weight rules of spec §6.3: files an encoder writes now weigh by columns
-/// (`GCRW`), older ones per pixel.
-const RULES: [WeightRule; 2] = [WeightRule::Columns, WeightRule::PerPixel];
+/// Two weight rules of spec §6.3: files an encoder writes now weigh by columns in bands of
+/// 32 rows (`GCRT`), files before 1.4 per pixel.
+const RULES: [WeightRule; 2] = [WeightRule::Columns32, WeightRule::PerPixel];
 
 /// A random scene of `n` Gaussians at 768×512 (σ 0.5–8 px) weighed by `rule`.
 fn scene(n: usize, blend: Blend, rule: WeightRule) -> gsi::Scene {

@@ -180,7 +180,8 @@ pub fn to_text(f: &GsiFile) -> String {
             ""
         },
         match f.records.weights {
-            WeightRule::Columns => "by columns (GCRW)",
+            WeightRule::Columns => "by columns in bands of 16 rows (GCRW)",
+            WeightRule::Columns32 => "by columns in bands of 32 rows (GCRT)",
             WeightRule::PerPixel => "per pixel",
         },
         f.file_bytes,

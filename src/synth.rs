@@ -300,34 +300,40 @@ mod corpus {
         let mut records = random(14, SceneSpec::new(40, 30, 100, Blend::Sum));
         records.tone = Some(three_curves());
         out.push(valid_file("tone-curve-3-curves-sum-100", &records));
-        // The column rule (GCRW, spec §6.3.2), as every encoder of version 1.4 writes it:
-        // both blend modes over several bands of rows, thin and steep Gaussians (σ from
-        // 0.05 px, which the rule weighs per pixel), and degenerate covariances.
-        let columns = |seed, w, h, n, blend, cov_param, with_opacity, sigma_px| {
-            let scene = random_scene(
-                seed,
-                SceneSpec {
-                    sigma_px,
-                    weights: WeightRule::Columns,
-                    ..spec(w, h, n, blend, cov_param, with_opacity)
-                },
-            );
-            Records::from_scene(&scene, BitDepths::default())
-        };
-        out.push(valid_file(
-            "columns-sum-lsr-800",
-            &columns(18, 96, 80, 800, Sum, Lsr, false, (0.05, 12.0)),
-        ));
-        out.push(valid_file(
-            "columns-alpha-cholesky-500-opacity",
-            &columns(19, 80, 72, 500, Alpha, Cholesky, true, (0.05, 12.0)),
-        ));
-        let mut degenerate_columns = degenerate(Lsr);
-        degenerate_columns.weights = WeightRule::Columns;
-        out.push(valid_file(
-            "columns-degenerate-covariances",
-            &degenerate_columns,
-        ));
+        // The column rule (spec §6.3.2) in bands of 16 rows (GCRW), as every encoder of
+        // version 1.4 wrote it, and of 32 (GCRT), as every encoder of 1.5 writes it: both
+        // blend modes over several bands of rows, thin and steep Gaussians (σ from 0.05
+        // px, which the rule weighs per pixel), and degenerate covariances.
+        for (prefix, weights) in [
+            ("columns", WeightRule::Columns),
+            ("columns32", WeightRule::Columns32),
+        ] {
+            let columns = |seed, w, h, n, blend, cov_param, with_opacity, sigma_px| {
+                let scene = random_scene(
+                    seed,
+                    SceneSpec {
+                        sigma_px,
+                        weights,
+                        ..spec(w, h, n, blend, cov_param, with_opacity)
+                    },
+                );
+                Records::from_scene(&scene, BitDepths::default())
+            };
+            out.push(valid_file(
+                &format!("{prefix}-sum-lsr-800"),
+                &columns(18, 96, 80, 800, Sum, Lsr, false, (0.05, 12.0)),
+            ));
+            out.push(valid_file(
+                &format!("{prefix}-alpha-cholesky-500-opacity"),
+                &columns(19, 80, 72, 500, Alpha, Cholesky, true, (0.05, 12.0)),
+            ));
+            let mut degenerate_columns = degenerate(Lsr);
+            degenerate_columns.weights = weights;
+            out.push(valid_file(
+                &format!("{prefix}-degenerate-covariances"),
+                &degenerate_columns,
+            ));
+        }
         out
     }
 
@@ -584,18 +590,39 @@ mod corpus {
                 with_trc(&[good.clone(), good.clone()]),
             ));
         }
-        // GCRW (spec §6.3.2), critical and empty: a payload, or a second one, refuses
-        // the file.
+        // GCRW and GCRT (spec §6.3.2), critical and empty: a payload, a second one, or
+        // one of each refuses the file.
         {
-            let with_crw = |payloads: &[&[u8]]| {
+            let with = |chunks: &[(ChunkType, &[u8])]| {
                 let mut p = parts.clone();
-                for (k, d) in payloads.iter().enumerate() {
-                    p.insert(1 + k, (ChunkType::COLUMN_WEIGHTS, d.to_vec()));
+                for (k, (ty, d)) in chunks.iter().enumerate() {
+                    p.insert(1 + k, (*ty, d.to_vec()));
                 }
                 assemble(&p)
             };
-            files.push((K::BadChunkLength, "gcrw-1-byte", with_crw(&[&[0]])));
-            files.push((K::ChunkOrder, "duplicate-gcrw", with_crw(&[&[], &[]])));
+            let (crw, crt) = (ChunkType::COLUMN_WEIGHTS, ChunkType::COLUMN_WEIGHTS_32);
+            files.push((K::BadChunkLength, "gcrw-1-byte", with(&[(crw, &[0])])));
+            files.push((
+                K::ChunkOrder,
+                "duplicate-gcrw",
+                with(&[(crw, &[]), (crw, &[])]),
+            ));
+            files.push((K::BadChunkLength, "gcrt-1-byte", with(&[(crt, &[0])])));
+            files.push((
+                K::ChunkOrder,
+                "duplicate-gcrt",
+                with(&[(crt, &[]), (crt, &[])]),
+            ));
+            files.push((
+                K::ChunkOrder,
+                "gcrw-and-gcrt",
+                with(&[(crw, &[]), (crt, &[])]),
+            ));
+            files.push((
+                K::ChunkOrder,
+                "gcrt-and-gcrw",
+                with(&[(crt, &[]), (crw, &[])]),
+            ));
         }
         files.push((
             K::Truncated,

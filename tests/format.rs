@@ -900,55 +900,64 @@ fn spec_settings_example() {
     assert_eq!(s.to_text(), written);
 }
 
-/// `GCRW` (spec §6.3.2): written empty right after `GHDR` and `gCRM` where the records
-/// weigh by columns, read back as the rule; a file without it weighs per pixel, bit for
-/// bit as before; a decoder that does not know it refuses the file by name.
+/// `GCRW` and `GCRT` (spec §6.3.2): written empty right after `GHDR` and `gCRM` where the
+/// records weigh by columns (in bands of 16 rows or of 32), read back as the rule; a file
+/// without either weighs per pixel, bit for bit as before.
 #[test]
-fn the_column_rule_chunk_is_written_read_and_renders_as_specified() {
+fn the_column_rule_chunks_are_written_read_and_render_as_specified() {
     let mut spec = SceneSpec::new(40, 36, 200, Blend::Sum);
     spec.sigma_px = (0.3, 12.0);
     let per_pixel = Records::from_scene(&random_scene(32, spec), BitDepths::default());
-    let columns = Records {
-        weights: gsi::WeightRule::Columns,
-        ..per_pixel.clone()
-    };
     let opts = WriteOptions {
         settings: Some("generator=test".into()),
         ..WriteOptions::default()
     };
-    let [plain, marked] = [&per_pixel, &columns].map(|r| format::to_bytes(r, &opts).unwrap());
+    let plain = format::to_bytes(&per_pixel, &opts).unwrap();
     let chunks = |bytes: &[u8]| {
         let file = format::read_file(bytes, Limits::default()).unwrap();
         (file.chunks.iter().map(|c| c.ty).collect::<Vec<_>>(), file)
     };
-    let (types, file) = chunks(&marked);
-    assert_eq!(
-        types[..3],
-        [
-            ChunkType::HEADER,
-            ChunkType::COMPRESSION_META,
-            ChunkType::COLUMN_WEIGHTS
-        ]
-    );
-    assert_eq!(file.records.weights, gsi::WeightRule::Columns);
-    assert_eq!(marked.len(), plain.len() + 12);
     let (types, file) = chunks(&plain);
     assert!(!types.contains(&ChunkType::COLUMN_WEIGHTS));
+    assert!(!types.contains(&ChunkType::COLUMN_WEIGHTS_32));
     assert_eq!(file.records.weights, gsi::WeightRule::PerPixel);
-
-    // The two rules differ in the last bits of some weights only.
     let (w, h) = (80, 72);
-    let [a, b] = [&per_pixel, &columns].map(|r| gsi::render::render(&r.to_scene(), w, h).unwrap());
-    assert_ne!(a.data, b.data);
-    let worst = a
-        .data
-        .iter()
-        .zip(&b.data)
-        .map(|(x, y)| (x - y).abs())
-        .fold(0f32, f32::max);
-    assert!(worst < 1e-3, "{worst}");
-    let (a8, b8) = (a.to_rgb8(), b.to_rgb8());
-    let moved = a8.iter().zip(&b8).filter(|(x, y)| x != y).count();
-    assert!(moved * 1000 < a8.len(), "{moved} of {}", a8.len());
-    assert!(a8.iter().zip(&b8).all(|(x, y)| x.abs_diff(*y) <= 1));
+    let a = gsi::render::render(&per_pixel.to_scene(), w, h).unwrap();
+    let mut renders = Vec::new();
+    for (rule, ty) in [
+        (gsi::WeightRule::Columns, ChunkType::COLUMN_WEIGHTS),
+        (gsi::WeightRule::Columns32, ChunkType::COLUMN_WEIGHTS_32),
+    ] {
+        let columns = Records {
+            weights: rule,
+            ..per_pixel.clone()
+        };
+        let marked = format::to_bytes(&columns, &opts).unwrap();
+        let (types, file) = chunks(&marked);
+        assert_eq!(
+            types[..3],
+            [ChunkType::HEADER, ChunkType::COMPRESSION_META, ty]
+        );
+        assert_eq!(types.len(), chunks(&plain).0.len() + 1);
+        assert_eq!(file.records.weights, rule);
+        assert_eq!(marked.len(), plain.len() + 12);
+
+        // Each rule differs from the per-pixel one in the last bits of some weights only.
+        let b = gsi::render::render(&columns.to_scene(), w, h).unwrap();
+        assert_ne!(a.data, b.data, "{rule:?}");
+        let worst = a
+            .data
+            .iter()
+            .zip(&b.data)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0f32, f32::max);
+        assert!(worst < 1e-3, "{rule:?}: {worst}");
+        let (a8, b8) = (a.to_rgb8(), b.to_rgb8());
+        let moved = a8.iter().zip(&b8).filter(|(x, y)| x != y).count();
+        assert!(moved * 1000 < a8.len(), "{rule:?}: {moved} of {}", a8.len());
+        assert!(a8.iter().zip(&b8).all(|(x, y)| x.abs_diff(*y) <= 1));
+        renders.push(b.data);
+    }
+    // Bands of 32 rows carry weights across row 16, 48, …: other bits than bands of 16.
+    assert_ne!(renders[0], renders[1]);
 }

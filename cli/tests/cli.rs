@@ -494,11 +494,12 @@ fn encode_refuses_what_it_cannot_do() {
         String::from_utf8_lossy(&ok.stderr)
     );
     let info = String::from_utf8(gsi(&["info", o, "--json"]).stdout).unwrap();
-    // Every file the encoder writes weighs by columns (spec §6.3.2, `GCRW`).
+    // Every file the encoder writes weighs by columns in bands of 32 rows (spec §6.3.2,
+    // `GCRT`).
     assert!(
         info.contains("\"bits\": 9")
             && info.contains("bits_per_gaussian")
-            && info.contains("\"weights\": \"columns\""),
+            && info.contains("\"weights\": \"columns-32\""),
         "{info}"
     );
     std::fs::remove_file(o).unwrap();

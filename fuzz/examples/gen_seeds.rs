@@ -135,15 +135,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "zstd".into(),
         to_bytes(&Records::from_scene(&grid, BitDepths::default()), &opts)?,
     ));
-    // Weights by the column rule (GCRW, spec §6.3.2), as the encoder writes files now:
-    // thin Gaussians (σ from 0.05 px) over more than one band of rows.
-    for (name, blend, seed) in [
-        ("columns-sum", Sum, 0x5eed_c0),
-        ("columns-alpha", Alpha, 0x5eed_c1),
+    // Weights by the column rule (spec §6.3.2) in bands of 32 rows (GCRT), as the encoder
+    // writes files now, and of 16 (GCRW), as version 1.4 wrote them: thin Gaussians (σ
+    // from 0.05 px) over more than one band of rows.
+    use gsi::model::WeightRule::{Columns, Columns32};
+    for (name, blend, seed, weights, (h, n)) in [
+        ("columns-sum", Sum, 0x5eed_c0, Columns, (36, 40)),
+        ("columns-alpha", Alpha, 0x5eed_c1, Columns, (36, 40)),
+        ("columns32-sum", Sum, 0x5eed_c2, Columns32, (70, 60)),
+        ("columns32-alpha", Alpha, 0x5eed_c3, Columns32, (70, 60)),
     ] {
-        let mut spec = SceneSpec::new(40, 36, 40, blend);
+        let mut spec = SceneSpec::new(40, h, n, blend);
         spec.sigma_px = (0.05, 10.0);
-        spec.weights = gsi::model::WeightRule::Columns;
+        spec.weights = weights;
         let records = Records::from_scene(&random_scene(seed, spec), DEFAULT);
         seeds.push((name.into(), to_bytes(&records, &WriteOptions::default())?));
     }

@@ -240,9 +240,10 @@ def read(data: Data) -> Dict[str, Any]:
     ``covariance`` (N×2×2, the matrix in the same normalized units, under the format's
     clamps), ``colors`` (N×3, sRGB-encoded), ``opacity`` (N, or None: all 1), ``tone``
     (None, or the tone curve every blended value goes through: a ``uint16`` array of 1 or 3
-    rows of knots) and ``weights`` (``"columns"``, the rule of the files written since
-    format 1.4, or ``"per-pixel"``: how a Gaussian's weight at a pixel is computed, which
-    moves rare 8-bit values by one step). :func:`render` of this dict, edited or not, renders it; ``covariance``
+    rows of knots) and ``weights`` (``"columns-32"``, the rule of the files written since
+    format 1.5, ``"columns"``, that of files written by format 1.4, or ``"per-pixel"``:
+    how a Gaussian's weight at a pixel is computed, which moves rare 8-bit values by one
+    step). :func:`render` of this dict, edited or not, renders it; ``covariance``
     is derived and not read back.
     """
     d = _gsi.read(_bytes(data))
@@ -285,7 +286,7 @@ def render(
     ``width`` and ``height`` default to the scene's stored size, and one of them alone
     keeps its aspect ratio, as in :func:`decode`; ``render(read(f), w, h)`` gives exactly
     ``decode(f, width=w, height=h)``. Values are taken as float32; ``opacity`` and
-    ``tone`` may be None, and ``weights`` left out is ``"columns"``.
+    ``tone`` may be None, and ``weights`` left out is ``"columns-32"``.
     """
     dt = np.dtype(dtype)
     if dt not in (np.uint8, np.float32, np.float64):
@@ -310,7 +311,7 @@ def render(
         int(scene["height"]),
         str(scene["blend"]),
         str(scene["cov_param"]),
-        str(scene.get("weights", "columns")),
+        str(scene.get("weights", "columns-32")),
         f32("positions", 2),
         f32("cov", 3),
         f32("colors", 3),

@@ -129,10 +129,16 @@ fn blend_named(name: &str) -> Result<Blend, String> {
 }
 
 fn weights_named(name: &str) -> Result<WeightRule, String> {
-    [WeightRule::Columns, WeightRule::PerPixel]
-        .into_iter()
-        .find(|w| w.name() == name)
-        .ok_or_else(|| format!("weights {name:?}: expected \"columns\" or \"per-pixel\""))
+    [
+        WeightRule::Columns32,
+        WeightRule::Columns,
+        WeightRule::PerPixel,
+    ]
+    .into_iter()
+    .find(|w| w.name() == name)
+    .ok_or_else(|| {
+        format!("weights {name:?}: expected \"columns-32\", \"columns\" or \"per-pixel\"")
+    })
 }
 
 fn cov_param_named(name: &str) -> Result<CovParam, String> {

@@ -240,7 +240,11 @@ def test_read_and_render_agree_with_decode(encoded, dark_encoded):
 
 @pytest.mark.parametrize(
     "name, weights",
-    [("sum-lsr-3000.gsi", "per-pixel"), ("columns-sum-lsr-800.gsi", "columns")],
+    [
+        ("sum-lsr-3000.gsi", "per-pixel"),
+        ("columns-sum-lsr-800.gsi", "columns"),
+        ("columns32-sum-lsr-800.gsi", "columns-32"),
+    ],
 )
 def test_read_keeps_the_weight_rule_of_older_files(name, weights):
     from pathlib import Path

@@ -49,7 +49,7 @@ pub fn section(stamp: &(String, String)) -> String {
             )
         })
     };
-    let parse: Vec<f64> = scenes(Blend::Sum, WeightRule::Columns)
+    let parse: Vec<f64> = scenes(Blend::Sum, WeightRule::Columns32)
         .iter()
         .map(|scene| {
             let bytes = gsi::format::to_bytes(
@@ -74,8 +74,12 @@ pub fn section(stamp: &(String, String)) -> String {
     );
     let rules = [
         (
+            WeightRule::Columns32,
+            "by columns in bands of 32 rows (§6.3.2, files written now)",
+        ),
+        (
             WeightRule::Columns,
-            "by columns (§6.3.2, files written now)",
+            "by columns in bands of 16 rows (§6.3.2, files of 1.4)",
         ),
         (WeightRule::PerPixel, "per pixel (§6.3, files before 1.4)"),
     ];

@@ -36,11 +36,6 @@ pub const TRANSMITTANCE_MIN: f32 = 1e-4;
 /// displayable colours are in `[0, 1]` and fitted ones stay within a few units.
 pub const COLOR_MAX: f32 = 64.0;
 
-/// Rows of a band of the column rule (§6.3.2): in every band of this many output rows,
-/// from row 0, a Gaussian's weights down a pixel column start again from `E` at the first
-/// row of its box, so that no weight is more than 15 products away from an `E`, and a
-/// decoder that renders tiles of 16 rows never carries a weight from one tile to the next.
-pub const COLUMN_BAND: u32 = 16;
 /// `2^-80`: a weight of the column rule below it is no longer carried down its column
 /// (§6.3.2); the lane waits, dark, until its power reaches [`COLUMN_START`]. Carried
 /// weights stay far above `E`'s floor, and clear of the slow subnormal range.

@@ -138,7 +138,7 @@ pub struct Scene {
     /// `GTRC`); `None` shows the blended values as they are.
     pub tone: Option<ToneCurve>,
     /// How a Gaussian's weight at a pixel is computed (a file with `GCRW` says
-    /// [`WeightRule::Columns`]).
+    /// [`WeightRule::Columns`], one with `GCRT` [`WeightRule::Columns32`]).
     pub weights: WeightRule,
 }
 
@@ -149,9 +149,13 @@ pub enum WeightRule {
     /// `E(power)` at every pixel (§6.3): files without a `GCRW` chunk.
     PerPixel,
     /// Down each pixel column by two products a row from an `E` at the first row of each
-    /// band of 16 rows (§6.3.2): files with a `GCRW` chunk, which every encoder of version
-    /// 1.4 writes: two products a pixel where §6.3 takes the power and `E`.
+    /// band of 16 rows (§6.3.2): files with a `GCRW` chunk, which encoders of version 1.4
+    /// wrote: two products a pixel where §6.3 takes the power and `E`.
     Columns,
+    /// The column rule in bands of 32 rows (§6.3.2): files with a `GCRT` chunk, which
+    /// every encoder of version 1.5 writes. A column starts from `E` half as often, and a
+    /// renderer bins each Gaussian to half as many bands.
+    Columns32,
 }
 
 impl WeightRule {
@@ -160,6 +164,20 @@ impl WeightRule {
         match self {
             WeightRule::PerPixel => "per-pixel",
             WeightRule::Columns => "columns",
+            WeightRule::Columns32 => "columns-32",
+        }
+    }
+
+    /// Rows of the column rule's bands (spec §6.3.2), `None` for the per-pixel rule: in
+    /// every band of this many output rows, from row 0, a Gaussian's weights down a pixel
+    /// column start again from `E` at the first row of its box, so that no weight is more
+    /// than `band − 1` steps from an `E`, and a decoder that renders tiles of that many
+    /// rows never carries a weight from one tile to the next.
+    pub fn band_rows(self) -> Option<u32> {
+        match self {
+            WeightRule::PerPixel => None,
+            WeightRule::Columns => Some(16),
+            WeightRule::Columns32 => Some(32),
         }
     }
 }

@@ -437,7 +437,7 @@ impl<'a> Fitter<'a> {
             blend: self.blend,
             cov_param: CovParam::LogScaleRotation,
             gaussians: g,
-            weights: WeightRule::Columns,
+            weights: WeightRule::Columns32,
         }
     }
 
@@ -1128,7 +1128,7 @@ pub fn encode(
             blend: opts.blend,
             cov_param: CovParam::LogScaleRotation,
             gaussians: params.clone(),
-            weights: WeightRule::Columns,
+            weights: WeightRule::Columns32,
         };
         let per_g = coded_bytes_per_gaussian(&scene, bits) * 1.02;
         let fits = fitting_count(b, px, per_g);

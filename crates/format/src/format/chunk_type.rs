@@ -20,6 +20,9 @@ impl ChunkType {
     /// Weights by the column rule (spec §6.3.2, version 1.4): empty, its presence is the
     /// message.
     pub const COLUMN_WEIGHTS: ChunkType = ChunkType(*b"GCRW");
+    /// Weights by the column rule in bands of 32 rows (spec §6.3.2, version 1.5): empty,
+    /// as `GCRW`, which a file may not carry beside it.
+    pub const COLUMN_WEIGHTS_32: ChunkType = ChunkType(*b"GCRT");
     /// Compression metadata.
     pub const COMPRESSION_META: ChunkType = ChunkType(*b"gCRM");
     /// Reserved: a fitted stage-2 enhancer.

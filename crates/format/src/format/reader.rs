@@ -49,7 +49,7 @@ fn length_range(ty: ChunkType) -> Option<(u32, u32)> {
     use super::records::attribute_preamble_len as pre;
     Some(match ty {
         ChunkType::HEADER => (HEADER_LEN as u32, HEADER_LEN as u32),
-        ChunkType::END | ChunkType::COLUMN_WEIGHTS => (0, 0),
+        ChunkType::END | ChunkType::COLUMN_WEIGHTS | ChunkType::COLUMN_WEIGHTS_32 => (0, 0),
         ChunkType::POSITIONS => (pre(2) as u32, u32::MAX),
         ChunkType::COVARIANCE | ChunkType::COLORS => (pre(3) as u32, u32::MAX),
         ChunkType::OPACITY => (pre(1) as u32, u32::MAX),
@@ -115,7 +115,7 @@ impl<R: Read> Decoder<R> {
         let header = self.read_header()?;
         let (mut pos, mut cov, mut col, mut opa, mut meta) = (None, None, None, None, None);
         let mut tone = None;
-        let mut columns = false;
+        let mut columns: Option<WeightRule> = None;
         // Stage 2's chunks are kept unparsed (spec §2.3), but each may appear once.
         let (mut enhancer, mut original) = (false, false);
         let mut ancillary = Vec::new();
@@ -160,9 +160,24 @@ impl<R: Read> Decoder<R> {
                     once(tone.is_some())?;
                     tone = Some(super::trc::parse(&c.data).map_err(here)?);
                 }
-                ChunkType::COLUMN_WEIGHTS => {
-                    once(columns)?;
-                    columns = true;
+                ChunkType::COLUMN_WEIGHTS | ChunkType::COLUMN_WEIGHTS_32 => {
+                    let rule = if c.ty == ChunkType::COLUMN_WEIGHTS {
+                        WeightRule::Columns
+                    } else {
+                        WeightRule::Columns32
+                    };
+                    match columns {
+                        None => columns = Some(rule),
+                        Some(seen) if seen == rule => once(true)?,
+                        // One column rule per file (spec §2.4).
+                        Some(_) => {
+                            return Err(Error::new(
+                                ErrorKind::ChunkOrder,
+                                "beside the other column rule's chunk (GCRW and GCRT)",
+                            )
+                            .at(Some(c.ty), offset))
+                        }
+                    }
                 }
                 ChunkType::COMPRESSION_META => {
                     once(meta.is_some())?;
@@ -201,11 +216,7 @@ impl<R: Read> Decoder<R> {
             colors: col.ok_or_else(|| missing("GCOL"))?,
             opacity: opa,
             tone,
-            weights: if columns {
-                WeightRule::Columns
-            } else {
-                WeightRule::PerPixel
-            },
+            weights: columns.unwrap_or(WeightRule::PerPixel),
         };
         Ok(GsiFile {
             records,

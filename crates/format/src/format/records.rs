@@ -252,7 +252,8 @@ pub struct Records {
     pub opacity: Option<Attribute>,
     /// The `GTRC` chunk (spec §6.6): `None`, the blended values are shown as they are.
     pub tone: Option<crate::model::ToneCurve>,
-    /// [`WeightRule::Columns`] where the file has a `GCRW` chunk (spec §6.3.2).
+    /// [`WeightRule::Columns`] where the file has a `GCRW` chunk, [`WeightRule::Columns32`]
+    /// where it has `GCRT` (spec §6.3.2).
     pub weights: WeightRule,
 }
 

@@ -40,7 +40,8 @@ impl Default for WriteOptions {
 
 /// Write a complete file and return its size in bytes.
 ///
-/// Chunk order: signature, `GHDR`, `gCRM`, `GCRW` (where the records weigh by columns),
+/// Chunk order: signature, `GHDR`, `gCRM`, `GCRW` or `GCRT` (where the records weigh by
+/// columns),
 /// `GPOS`, `GCOV`, `GCOL`, `GOPA`, `GTRC`, the given ancillary chunks, `GEND`. Every
 /// payload is built first so that `gCRM` can state the exact size of the file it is part
 /// of.
@@ -65,8 +66,10 @@ pub fn write_file<W: Write>(w: &mut W, records: &Records, opts: &WriteOptions) -
     let mut body: Vec<(ChunkType, Vec<u8>)> = Vec::new();
     // First after the header and `gCRM`, so that a streaming decoder knows the rule before
     // any Gaussian.
-    if records.weights == WeightRule::Columns {
-        body.push((ChunkType::COLUMN_WEIGHTS, Vec::new()));
+    match records.weights {
+        WeightRule::PerPixel => {}
+        WeightRule::Columns => body.push((ChunkType::COLUMN_WEIGHTS, Vec::new())),
+        WeightRule::Columns32 => body.push((ChunkType::COLUMN_WEIGHTS_32, Vec::new())),
     }
     let mut coded = false;
     for (ty, a) in attributes {

@@ -1,17 +1,17 @@
 //! The tiled CPU rasterizer.
 //!
-//! Work is split into bands of [`TILE`] pixel rows. Each band owns a contiguous slice of
+//! Work is split into bands of [`BAND`] pixel rows. Each band owns a contiguous slice of
 //! the output, so bands can be rendered on different threads without sharing or
 //! `unsafe`. Inside a band, a Gaussian's box is cut to the columns that its ellipse
-//! reaches over the band's rows ([`band_columns`]) and the Gaussian binned to the 16×16
-//! tiles they cross; a tile visits its list in stored order and evaluates only the pixels
+//! reaches over the band's rows ([`band_columns`]) and the Gaussian binned to the tiles
+//! of [`TILE`] columns that they cross; a tile visits its list in stored order and evaluates only the pixels
 //! inside both the tile and the cut box. Which thread renders a band never changes the
 //! arithmetic, so the parallel and sequential builds give identical bits.
 
 use super::lanes::{Acc, Kernel, TILE_W};
 use super::project::{Projected, Rect};
 use super::tiles::{band_columns, runs, Bins};
-use super::TILE;
+use super::{BAND, TILE};
 use gsi_format::model::{Blend, ToneCurve, WeightRule};
 use std::sync::Mutex;
 
@@ -241,8 +241,8 @@ fn render_with<O: Output>(
     (parallel, kernel, (band_budget, tile_budget)): (bool, Kernel, (u64, u64)),
 ) -> std::io::Result<()> {
     let row_len = width as usize * O::PER_PIXEL;
-    let band_len = TILE.min(height) as usize * row_len;
-    let band_count = height.div_ceil(TILE);
+    let band_len = BAND.min(height) as usize * row_len;
+    let band_count = height.div_ceil(BAND);
     // Bands per step: all of a run into the whole image, or a window's worth.
     let per_step = match sink {
         None => {
@@ -257,7 +257,7 @@ fn render_with<O: Output>(
     let spans = proj
         .iter()
         .enumerate()
-        .map(|(k, p)| (k as u32, p.bbox.y0 / TILE, p.bbox.y1 / TILE));
+        .map(|(k, p)| (k as u32, p.bbox.y0 / BAND, p.bbox.y1 / BAND));
 
     // Through a window, each thread keeps its scratch from step to step (into a whole
     // image, one is made per run and thread).
@@ -271,7 +271,7 @@ fn render_with<O: Output>(
         let mut first = run.start;
         while first < run.end {
             let end = run.end.min(first.saturating_add(per_step));
-            let rows = (end * TILE).min(height) as usize - (first * TILE) as usize;
+            let rows = (end * BAND).min(height) as usize - (first * BAND) as usize;
             let step = match sink {
                 None => &mut out[first as usize * band_len..][..rows * row_len],
                 Some(_) => &mut out[..rows * row_len],
@@ -318,7 +318,7 @@ fn render_bands<O: Output>(
             tone,
             kernel,
             width,
-            y0: band * TILE,
+            y0: band * BAND,
             tile_budget,
         };
         ctx.render::<O>(bands.slot(band), rows, tiles);
@@ -369,18 +369,19 @@ fn thread_slot() -> usize {
     0
 }
 
-/// Bands [`render_projected_rows`] takes a step at a time: six per thread, so that the
-/// threads share a step's uneven bands, and the window stays small (a 768-pixel-wide
-/// output on two threads: 192 rows, 432 KiB). Each step ends with the threads waiting
-/// while the rows are written, so fewer steps cost less, until the window outgrows the
-/// memory a decode has freed by then (its codes and dequantized attributes) and faults
-/// in fresh pages. On two cores, `gsi decode` to PPM (61–101 paired processes): six
-/// against four, 0.6–0.7 ms less CPU for kodim23, kodim13 and Barbara (768×512 and
-/// 720×576), 0.7–1.1 ms for a 1024×768 photograph, the same at 12 MP; eight against
-/// four, 0.1–0.25 ms less for kodim23 (108 more page faults), 0.7 ms for the 1024×768
-/// one. (Two against four cost 1.0 ms more, measured before the freed memory was reused.)
+/// Bands [`render_projected_rows`] takes a step at a time: three per thread (96 rows), so
+/// that the threads share a step's uneven bands, and the window stays small (a
+/// 768-pixel-wide output on two threads: 192 rows, 432 KiB). Each step ends with the
+/// threads waiting while the rows are written, so fewer steps cost less, until the window
+/// outgrows the memory a decode has freed by then (its codes and dequantized attributes)
+/// and faults in fresh pages. On two cores, `gsi decode` to PPM (61–101 paired
+/// processes), in bands of 16 rows: 96 rows a thread against 64, 0.6–0.7 ms less CPU for
+/// kodim23, kodim13 and Barbara (768×512 and 720×576), 0.7–1.1 ms for a 1024×768
+/// photograph, the same at 12 MP; 128 against 64, 0.1–0.25 ms less for kodim23 (108 more
+/// page faults), 0.7 ms for the 1024×768 one. (32 against 64 cost 1.0 ms more, measured
+/// before the freed memory was reused.)
 pub fn window_bands(parallel: bool) -> usize {
-    (6 * threads(parallel)).min(32)
+    (3 * threads(parallel)).min(16)
 }
 
 /// What every tile of one band needs to know.
@@ -454,7 +455,11 @@ mod tests {
     use gsi_format::model::CovParam;
     use gsi_synth::{random_scene, SceneSpec};
 
-    const RULES: [WeightRule; 2] = [WeightRule::PerPixel, WeightRule::Columns];
+    const RULES: [WeightRule; 3] = [
+        WeightRule::PerPixel,
+        WeightRule::Columns,
+        WeightRule::Columns32,
+    ];
 
     fn render_both(blend: (Blend, WeightRule), w: u32, h: u32) -> (Vec<f32>, Vec<f32>) {
         let mut spec = SceneSpec::new(64, 48, 400, blend.0);
@@ -588,7 +593,10 @@ mod tests {
                 g.colors.push([rng.unit(), rng.unit() - 0.5, 1.0]);
             }
             g.opacity = Some((0..200).map(|_| rng.range(0.004, 1.0)).collect());
-            for blend in [Blend::Sum, Blend::Alpha] {
+            for (blend, rule) in [Blend::Sum, Blend::Alpha]
+                .into_iter()
+                .flat_map(|b| RULES[1..].iter().map(move |r| (b, r)))
+            {
                 let scene = Scene {
                     width: 64,
                     height: 48,
@@ -596,11 +604,11 @@ mod tests {
                     cov_param: CovParam::Cholesky,
                     gaussians: g.clone(),
                     tone: None,
-                    weights: WeightRule::Columns,
+                    weights: *rule,
                 };
                 for (w, h) in [(64, 48), (150, 110)] {
                     let proj = project_scene(&scene, w, h);
-                    let how = (blend, WeightRule::Columns);
+                    let how = (blend, *rule);
                     let diff = unlike_the_rule(&proj, how, (w, h), Kernel::detect());
                     assert!(diff.is_none(), "seed {seed} {blend:?} {w}x{h} at {diff:?}");
                 }
@@ -609,17 +617,20 @@ mod tests {
     }
 
     /// The column rule moves a blended value by a few millionths of the per-pixel rule's
-    /// (a weight is at most 15 rounded products from an `E`, and each ratio `r` carries
-    /// the rounding of a difference of two powers), far below an 8-bit step.
+    /// (a weight is at most 31 rounded steps from an `E`, and each ratio `r` carries the
+    /// rounding of a difference of two powers), far below an 8-bit step.
     #[test]
     fn the_column_rule_stays_near_the_per_pixel_rule() {
-        for blend in [Blend::Sum, Blend::Alpha] {
+        for (blend, columns) in [Blend::Sum, Blend::Alpha]
+            .into_iter()
+            .flat_map(|b| RULES[1..].iter().map(move |&r| (b, r)))
+        {
             let mut spec = SceneSpec::new(96, 64, 800, blend);
             spec.sigma_px = (0.3, 20.0);
             let scene = random_scene(9, spec);
             let (w, h) = (96, 64);
             let proj = project_scene(&scene, w, h);
-            let [a, b] = RULES.map(|rule| {
+            let [a, b] = [WeightRule::PerPixel, columns].map(|rule| {
                 let mut out = vec![0.0; (w * h * 3) as usize];
                 render_projected::<RgbF32>(&proj, (blend, rule), None, (w, h), &mut out, false);
                 out
@@ -630,14 +641,17 @@ mod tests {
                 .map(|(x, y)| (x - y).abs())
                 .fold(0f32, f32::max);
             // A flipped 1/255 cut moves a value by up to |colour|/255; elsewhere 1e-5.
-            assert!(worst < 5e-3, "{blend:?}: {worst}");
+            assert!(worst < 5e-3, "{blend:?} {columns:?}: {worst}");
             // Measured: median 1.2e-6, 99.9th percentile 5.6e-5 (sum; values up to a few units).
             let near = a
                 .iter()
                 .zip(&b)
                 .filter(|(x, y)| (*x - *y).abs() < 1e-4)
                 .count();
-            assert!(near as f64 > 0.999 * a.len() as f64, "{blend:?}: {near}");
+            assert!(
+                near as f64 > 0.999 * a.len() as f64,
+                "{blend:?} {columns:?}: {near}"
+            );
         }
     }
 
@@ -684,10 +698,10 @@ mod tests {
             let scene = random_scene(6, spec);
             let (w, h) = (45, 83);
             let proj = project_scene(&scene, w, h);
-            let rule = (blend, WeightRule::Columns);
+            let rule = (blend, WeightRule::Columns32);
             let mut whole = vec![0.0; (w * h * 3) as usize];
             render_projected::<RgbF32>(&proj, rule, None, (w, h), &mut whole, false);
-            let band_len = (TILE * w * 3) as usize;
+            let band_len = (BAND * w * 3) as usize;
             for budgets in [(BAND_BUDGET, TILE_BUDGET), (0, 0)] {
                 for bands in [1, 2, 5, 6] {
                     for parallel in [false, true] {

@@ -23,8 +23,9 @@
 //! and `E`. A lane evaluates `E` where it starts (its first row in the tile, or the row
 //! where a dark lane's power reaches the start level): kodim23 at 1 bpp starts lanes on
 //! 0.10 M of its 1.11 M chunk-rows, and its decode (parse and render, in process) takes
-//! 15.8 ms against 20.7 ms by §6.3. Tiles are 16 rows, the rule's bands, so no weight is
-//! carried from one tile to the next. (The blending is a trait with inlined methods, not
+//! 15.8 ms against 20.7 ms by §6.3. Tiles are [`BAND`] (32) rows, the bands of the rule
+//! in files written now (`GCRT`), so no weight is carried from one tile to the next; in
+//! a `GCRW` file's bands of 16 rows a column starts again at the tile's row 16. (The blending is a trait with inlined methods, not
 //! a closure: as a closure with two callers it was compiled apart from the
 //! `#[target_feature]` function, without AVX, and the loop called it for every chunk-row
 //! at half the speed. LLVM inlines some closures and not others; the hot ones here are
@@ -34,7 +35,7 @@
 //! may fuse multiply-adds (`F`), since a fit needs the decoder's values, not its bits.
 
 use super::project::{offset, Projected, Rect};
-use super::TILE;
+use super::{BAND, TILE};
 use gsi_format::contract::exp_in_range;
 pub use gsi_format::contract::mla;
 use gsi_format::contract::{
@@ -45,6 +46,7 @@ use gsi_format::model::{Blend, ToneCurve, WeightRule};
 /// Pixels per chunk: one AVX register of `f32`, two SSE or NEON ones.
 pub const LANES: usize = 8;
 pub(crate) const TILE_W: usize = TILE as usize;
+const TILE_H: usize = BAND as usize;
 
 /// One value per lane.
 pub type V = [f32; LANES];
@@ -243,7 +245,8 @@ impl Kernel {
     }
 
     /// Blend the Gaussians `list` (indices into `proj`, stored order) over tile `rect`
-    /// into `acc`, which holds zeros, with their weights by `rule`.
+    /// (at most [`BAND`] rows, from a multiple of them) into `acc`, which holds zeros,
+    /// with their weights by `rule`.
     pub fn tile(
         self,
         (blend, rule): (Blend, WeightRule),
@@ -252,7 +255,7 @@ impl Kernel {
         rect: Rect,
         acc: &mut Acc,
     ) {
-        let columns = rule == WeightRule::Columns;
+        let columns = rule.band_rows();
         match self {
             Kernel::Portable => tile::<false>(blend, columns, list, proj, rect, acc),
             #[cfg(target_arch = "x86_64")]
@@ -271,11 +274,11 @@ const ACC_W: usize = TILE_W + LANES;
 /// A tile in three planes (R, G, B) whose rows are [`LANES`] wider than a tile, so that a
 /// chunk starting at the box's first column never reaches the next row; the padding is
 /// only ever given zeros.
-pub struct Acc(pub [[f32; ACC_W * TILE_W]; 3]);
+pub struct Acc(pub [[f32; ACC_W * TILE_H]; 3]);
 
 impl Acc {
     pub fn zero() -> Acc {
-        Acc([[0.0; ACC_W * TILE_W]; 3])
+        Acc([[0.0; ACC_W * TILE_H]; 3])
     }
 
     /// Back to zeros, for the next tile.
@@ -313,21 +316,23 @@ impl Acc {
 }
 
 /// One build of the loops: the blend mode and the weight rule picked once per tile, so
-/// that each combination is a loop of its own.
+/// that each combination is a loop of its own. `columns`: the rows of the column rule's
+/// bands, `None` for the per-pixel rule.
 #[inline(always)]
 fn tile<const JOIN: bool>(
     blend: Blend,
-    columns: bool,
+    columns: Option<u32>,
     list: &[u32],
     proj: &[Projected],
     rect: Rect,
     acc: &mut Acc,
 ) {
-    match (blend, columns) {
-        (Blend::Sum, false) => tile_sum::<JOIN, false>(list, proj, rect, acc),
-        (Blend::Sum, true) => tile_sum::<JOIN, true>(list, proj, rect, acc),
-        (Blend::Alpha, false) => tile_alpha::<JOIN, false>(list, proj, rect, acc),
-        (Blend::Alpha, true) => tile_alpha::<JOIN, true>(list, proj, rect, acc),
+    let band = columns.unwrap_or(BAND);
+    match (blend, columns.is_some()) {
+        (Blend::Sum, false) => tile_sum::<JOIN, false>(list, proj, (rect, band), acc),
+        (Blend::Sum, true) => tile_sum::<JOIN, true>(list, proj, (rect, band), acc),
+        (Blend::Alpha, false) => tile_alpha::<JOIN, false>(list, proj, (rect, band), acc),
+        (Blend::Alpha, true) => tile_alpha::<JOIN, true>(list, proj, (rect, band), acc),
     }
 }
 
@@ -335,13 +340,13 @@ fn tile<const JOIN: bool>(
 /// [`Acc`] and the alphas of [`LANES`] pixels or of a tile row, 0 where the Gaussian does
 /// not touch the pixel), down each chunk column in turn or down the tile's two together;
 /// chunk-rows that take no light may be skipped. With `COLUMNS`, by the column rule of
-/// spec §6.3.2 (per pixel for a Gaussian steeper than [`COLUMN_STEEP`]), else by §6.3's
-/// per-pixel rule. With `CAP`, alphas are
-/// capped at [`ALPHA_MAX`] before the threshold, as `alpha` blending does.
+/// spec §6.3.2 in bands of `band` rows (per pixel for a Gaussian steeper than
+/// [`COLUMN_STEEP`]), else by §6.3's per-pixel rule. With `CAP`, alphas are capped at
+/// [`ALPHA_MAX`] before the threshold, as `alpha` blending does.
 #[inline(always)]
 fn chunk_rows<const JOIN: bool, const CAP: bool, const COLUMNS: bool>(
     f: &Footprint,
-    rect: Rect,
+    (rect, band): (Rect, u32),
     into: &mut impl Blender,
 ) {
     let g = f.g;
@@ -362,13 +367,21 @@ fn chunk_rows<const JOIN: bool, const CAP: bool, const COLUMNS: bool>(
         return;
     }
     // The column rule, on the tile's aligned chunks that the box meets: both of them at
-    // once where it meets both (see `column_rows`).
+    // once where it meets both (see `column_rows`), from the first row of each of the
+    // rule's bands that the box's rows in the tile meet (one, unless the rule's bands
+    // are shorter than the tile).
     let k = g.column_k();
     let first = f.lx0 / LANES;
-    if (f.lx1 - 1) / LANES == first {
-        column_rows::<1, CAP, _>(f, first * LANES, k, rect, into);
-    } else {
-        column_rows::<2, CAP, _>(f, 0, k, rect, into);
+    let mut y = f.ys.start;
+    while y < f.ys.end {
+        let end = ((y / band + 1) * band).min(f.ys.end);
+        let part = Footprint { ys: y..end, ..*f };
+        if (f.lx1 - 1) / LANES == first {
+            column_rows::<1, CAP, _>(&part, first * LANES, k, rect, into);
+        } else {
+            column_rows::<2, CAP, _>(&part, 0, k, rect, into);
+        }
+        y = end;
     }
 }
 
@@ -613,7 +626,7 @@ impl Blender for Sum<'_> {
 /// that still take light.
 struct Over<'a> {
     acc: &'a mut Acc,
-    trans: [f32; ACC_W * TILE_W],
+    trans: [f32; ACC_W * TILE_H],
     live: usize,
 }
 
@@ -656,14 +669,14 @@ impl Blender for Over<'_> {
 fn tile_sum<const JOIN: bool, const COLUMNS: bool>(
     list: &[u32],
     proj: &[Projected],
-    rect: Rect,
+    (rect, band): (Rect, u32),
     acc: &mut Acc,
 ) {
     let mut into = Sum(acc);
     for &k in list {
         let g = &proj[k as usize];
         if let Some(f) = Footprint::of(g, rect) {
-            chunk_rows::<JOIN, false, COLUMNS>(&f, rect, &mut into);
+            chunk_rows::<JOIN, false, COLUMNS>(&f, (rect, band), &mut into);
         }
     }
 }
@@ -674,18 +687,18 @@ fn tile_sum<const JOIN: bool, const COLUMNS: bool>(
 fn tile_alpha<const JOIN: bool, const COLUMNS: bool>(
     list: &[u32],
     proj: &[Projected],
-    rect: Rect,
+    (rect, band): (Rect, u32),
     acc: &mut Acc,
 ) {
     let mut into = Over {
         acc,
-        trans: [1.0f32; ACC_W * TILE_W],
+        trans: [1.0f32; ACC_W * TILE_H],
         live: ((rect.x1 - rect.x0) * (rect.y1 - rect.y0)) as usize,
     };
     for &k in list {
         let g = &proj[k as usize];
         if let Some(f) = Footprint::of(g, rect) {
-            chunk_rows::<JOIN, true, COLUMNS>(&f, rect, &mut into);
+            chunk_rows::<JOIN, true, COLUMNS>(&f, (rect, band), &mut into);
         }
         if into.live == 0 {
             break;
@@ -701,7 +714,7 @@ mod x86 {
     #[target_feature(enable = "avx2")]
     pub fn tile_avx2(
         blend: Blend,
-        columns: bool,
+        columns: Option<u32>,
         list: &[u32],
         proj: &[Projected],
         rect: Rect,
@@ -713,7 +726,7 @@ mod x86 {
     #[target_feature(enable = "avx2,avx512f,avx512vl")]
     pub fn tile_avx512(
         blend: Blend,
-        columns: bool,
+        columns: Option<u32>,
         list: &[u32],
         proj: &[Projected],
         rect: Rect,

@@ -6,8 +6,8 @@
 use super::rounding::{ceil, floor};
 use super::TILE;
 use gsi_format::contract::{
-    exp, ALPHA_MAX, ALPHA_MIN, COLOR_MAX, COLUMN_BAND, COLUMN_DARK, COLUMN_START, COLUMN_STEEP,
-    CORRELATION_MAX, EXTENT_SIGMAS, VAR_MAX, VAR_MIN,
+    exp, ALPHA_MAX, ALPHA_MIN, COLOR_MAX, COLUMN_DARK, COLUMN_START, COLUMN_STEEP, CORRELATION_MAX,
+    EXTENT_SIGMAS, VAR_MAX, VAR_MIN,
 };
 use gsi_format::model::{Blend, Scene, WeightRule};
 
@@ -136,12 +136,13 @@ impl Projected {
     /// The weight at pixel `(i, j)` under `rule`: [`Projected::alpha_at`] for
     /// [`WeightRule::PerPixel`] and for a Gaussian steeper than [`COLUMN_STEEP`]; else
     /// spec §6.3.2 in its plainest form, walking down column `i` from the first row of the
-    /// box in `j`'s band of [`COLUMN_BAND`] rows.
+    /// box in `j`'s band of the rule's rows ([`WeightRule::band_rows`]).
     pub fn weight_at(&self, i: u32, j: u32, blend: Blend, rule: WeightRule) -> Option<f32> {
         let [_, b, c] = self.conic;
-        if rule == WeightRule::PerPixel || c > COLUMN_STEEP {
-            return self.alpha_at(i, j, blend);
-        }
+        let band = match rule.band_rows() {
+            Some(band) if c <= COLUMN_STEEP => band,
+            _ => return self.alpha_at(i, j, blend),
+        };
         if !self.bbox.contains(i, j) {
             return None;
         }
@@ -153,7 +154,7 @@ impl Projected {
             let (dy0, dy1) = (offset(row, self.mean[1]), offset(row + 1, self.mean[1]));
             -0.5 * (c * (dy0 + dy1)) - b * dx
         };
-        let first = self.bbox.y0.max(j - j % COLUMN_BAND);
+        let first = self.bbox.y0.max(j - j % band);
         let k = exp(-c);
         // Dark (w = 0) until the power reaches the start level, then carried while the
         // weight stays at or above the dark level.
@@ -206,11 +207,12 @@ pub(crate) fn term_bound([a, b, c]: [f64; 3], mx: f64, my: f64) -> f64 {
 
 /// How far, in its logarithm, a weight is from `e^power` where the power's terms are
 /// bounded by `s` ([`term_bound`]). A pixel's binary32 power is off by less than 1e-6·s;
-/// a weight of the column rule (spec §6.3.2) by less than 31 such errors (its first power,
-/// and 15 times a step, whose terms are bounded as the power's) and 2e-5 (the rounding of
-/// up to 30 products and of `E(−C)` raised to up to the 105th power).
+/// a weight of the column rule (spec §6.3.2) in bands of up to 32 rows by less than 63
+/// such errors (its first power, and 31 times a step, whose terms are bounded as the
+/// power's) and 8e-5 (the rounding of up to 62 products, of 31 factors of the first
+/// ratio `E(D)`, and of `E(−C)` raised to up to the 465th power, each `E` within 1 ulp).
 pub(crate) fn log_weight_error(s: f64) -> f64 {
-    31e-6 * s + 2e-5
+    63e-6 * s + 8e-5
 }
 
 /// [`Projected::carried_throughout`] for a Gaussian centred at `mean` with `conic`, over
@@ -518,5 +520,23 @@ mod tests {
         let at = |row| q.weight_at(1, row, Blend::Sum, WeightRule::Columns);
         assert_eq!(at(16).map(f32::to_bits), Some(columns[0]));
         assert_eq!(at(17).map(f32::to_bits), Some(columns[1]));
+        // In bands of 32 rows (`GCRT`) the same rows 0 to 3 give the same weights, rows 16
+        // and 17 are carried from the box's first row, and rows 32 and 33 begin a band.
+        for row in 0..4 {
+            let w = p.weight_at(1, row, Blend::Sum, WeightRule::Columns32);
+            assert_eq!(w.map(f32::to_bits), Some(columns[row as usize]));
+        }
+        let at = |row| q.weight_at(1, row, Blend::Sum, WeightRule::Columns32);
+        // (Row 0's power, about −33, starts the column there, far below `1/255`.)
+        assert_eq!(at(0), None);
+        assert_eq!(at(16).map(f32::to_bits), Some(0x3F7C07EF));
+        assert_eq!(at(17).map(f32::to_bits), Some(0x3F657A11));
+        let r = Projected {
+            mean: [1.25, 32.75],
+            ..p
+        };
+        let at = |row| r.weight_at(1, row, Blend::Sum, WeightRule::Columns32);
+        assert_eq!(at(32).map(f32::to_bits), Some(columns[0]));
+        assert_eq!(at(33).map(f32::to_bits), Some(columns[1]));
     }
 }

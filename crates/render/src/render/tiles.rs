@@ -60,11 +60,11 @@ pub fn bin<I, S>(
 
 /// The largest `Q = -2·power` (exactly) at which a pixel may still reach the cut-off
 /// `cut`, where `s` bounds the magnitude of `Q`'s terms ([`term_bound`]). A margin of
-/// 1e-4·s + 1e-3 in `Q`, over twice [`log_weight_error`](super::project::log_weight_error)
+/// 2e-4·s + 1e-3 in `Q`, over twice [`log_weight_error`](super::project::log_weight_error)
 /// (which covers a pixel's power by the rule of §6.3 too), leaves out no pixel that
-/// reaches the cut by either rule.
+/// reaches the cut by any rule.
 fn reach(cut: f32, s: f64) -> f64 {
-    -2.0 * f64::from(cut) + 1e-3 + 1e-4 * s
+    -2.0 * f64::from(cut) + 1e-3 + 2e-4 * s
 }
 
 /// [`band_columns`] as tile columns `(lo, hi)` (inclusive): the tiles of the band that
