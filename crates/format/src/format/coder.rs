@@ -169,8 +169,28 @@ impl<'a> Decoder<'a> {
         Ok(b)
     }
 
+    /// One decision, or an error where the stream has ended before it.
     #[inline(always)]
     pub fn bit(&mut self, p: &mut Prob) -> Result<bool> {
+        let bit = self.decide(p);
+        self.in_time()?;
+        Ok(bit)
+    }
+
+    /// Whether every byte read so far lies in the stream: past its end, [`Decoder::decide`]
+    /// reads zeros, so that a value's decisions need no test each, only the value.
+    #[inline(always)]
+    fn in_time(&self) -> Result<()> {
+        if self.at > self.data.len() {
+            return Err(corrupt("coded stream ends before its last code"));
+        }
+        Ok(())
+    }
+
+    /// One decision, without the test that the stream has not ended ([`Decoder::in_time`]),
+    /// which the caller makes once a value.
+    #[inline(always)]
+    fn decide(&mut self, p: &mut Prob) -> bool {
         let bound = (self.range >> PROB_BITS) * u32::from(p.0);
         let bit = self.code >= bound;
         // Without branches: the decision is as unpredictable as the data, and a
@@ -191,10 +211,7 @@ impl<'a> Decoder<'a> {
         self.code = (self.code << n) | (u32::from(byte) & all_ones(shift));
         self.at += usize::from(shift);
         debug_assert!(self.range >= TOP);
-        if self.at > self.data.len() {
-            return Err(corrupt("coded stream ends before its last code"));
-        }
-        Ok(bit)
+        bit
     }
 
     /// Every byte must have been read: an encoder writes no more than it needs.
@@ -254,9 +271,10 @@ impl Magnitude {
     pub fn get(&mut self, d: &mut Decoder, max_bits: usize) -> Result<u64> {
         let max_bits = max_bits.min(MAX_MAGNITUDE_BITS);
         let mut e = 0;
-        while d.bit(&mut self.unary[e])? {
+        while d.decide(&mut self.unary[e]) {
             e += 1;
             if e >= max_bits {
+                d.in_time()?;
                 return Err(corrupt(format!(
                     "coded magnitude of more than {max_bits} bits"
                 )));
@@ -264,9 +282,10 @@ impl Magnitude {
         }
         let mut v = 1u64;
         for j in (0..e).rev() {
-            let b = d.bit(&mut self.mantissa[e * MAX_MAGNITUDE_BITS + j])?;
+            let b = d.decide(&mut self.mantissa[e * MAX_MAGNITUDE_BITS + j]);
             v = (v << 1) | u64::from(b);
         }
+        d.in_time()?;
         Ok(v - 1)
     }
 }
@@ -347,15 +366,16 @@ impl Tree {
             // that the next decision waits for a select, not a load. (The last level's
             // children are the padding past the tree, never decided.)
             let children = [self.nodes[2 * node], self.nodes[2 * node + 1]];
-            let bit = d.bit(&mut p)?;
+            let bit = d.decide(&mut p);
             self.nodes[node] = p;
             node = 2 * node + usize::from(bit);
             p = children[usize::from(bit)];
         }
         let mut q = (node - (1 << top)) as u32;
         for j in (0..rest).rev() {
-            q = (q << 1) | u32::from(d.bit(&mut self.low[usize::from(j)])?);
+            q = (q << 1) | u32::from(d.decide(&mut self.low[usize::from(j)]));
         }
+        d.in_time()?;
         Ok(q)
     }
 }
@@ -466,6 +486,23 @@ pub mod tests {
         let mut d = Decoder::new(&bytes).unwrap();
         d.bit(&mut Prob::default()).unwrap();
         assert!(d.finish().is_err());
+        // A stream cut short: the value whose decisions read past its end is refused as
+        // cut, not decoded from the zeros read there.
+        let mut e = Encoder::new();
+        let (mut m, mut t) = (Magnitude::default(), Tree::new(12));
+        for v in 0..200u64 {
+            m.put(&mut e, v * 977);
+            t.put(&mut e, (v * 31) as u32 % 4096);
+        }
+        let bytes = e.finish();
+        for cut in [4, 9, bytes.len() / 2, bytes.len() - 1] {
+            let mut d = Decoder::new(&bytes[..cut]).unwrap();
+            let (mut m, mut t) = (Magnitude::default(), Tree::new(12));
+            let err = (0..200)
+                .find_map(|_| m.get(&mut d, 20).and_then(|_| t.get(&mut d)).err())
+                .expect("a cut stream is refused");
+            assert!(err.to_string().contains("ends before"), "cut {cut}: {err}");
+        }
         // Arbitrary bytes decode to something or fail; they never panic.
         let mut rng = test_rng(1);
         for len in 4..64 {
