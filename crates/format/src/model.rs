@@ -142,11 +142,11 @@ pub struct Scene {
     pub weights: WeightRule,
 }
 
-/// How a Gaussian's weight at each pixel is computed: the two rules of spec §6.3, which
+/// How a Gaussian's weight at each pixel is computed: the rules of spec §6.3, which
 /// differ in the last bits of a weight and so, rarely, by one step of an 8-bit value.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum WeightRule {
-    /// `E(power)` at every pixel (§6.3): files without a `GCRW` chunk.
+    /// `E(power)` at every pixel (§6.3): files with neither `GCRW` nor `GCRT`.
     PerPixel,
     /// Down each pixel column by two products a row from an `E` at the first row of each
     /// band of 16 rows (§6.3.2): files with a `GCRW` chunk, which encoders of version 1.4
@@ -159,7 +159,8 @@ pub enum WeightRule {
 }
 
 impl WeightRule {
-    /// `"per-pixel"` or `"columns"`, as `gsi info --json` and the Python package say it.
+    /// `"per-pixel"`, `"columns"` or `"columns-32"`, as `gsi info --json` and the Python
+    /// package say it.
     pub fn name(self) -> &'static str {
         match self {
             WeightRule::PerPixel => "per-pixel",

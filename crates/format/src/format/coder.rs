@@ -216,6 +216,7 @@ impl<'a> Decoder<'a> {
 
     /// Every byte must have been read: an encoder writes no more than it needs.
     pub fn finish(self) -> Result<()> {
+        self.in_time()?;
         match self.data.len() - self.at {
             0 => Ok(()),
             left => Err(corrupt(format!(

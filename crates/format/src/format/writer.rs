@@ -41,10 +41,9 @@ impl Default for WriteOptions {
 /// Write a complete file and return its size in bytes.
 ///
 /// Chunk order: signature, `GHDR`, `gCRM`, `GCRW` or `GCRT` (where the records weigh by
-/// columns),
-/// `GPOS`, `GCOV`, `GCOL`, `GOPA`, `GTRC`, the given ancillary chunks, `GEND`. Every
-/// payload is built first so that `gCRM` can state the exact size of the file it is part
-/// of.
+/// columns), `GPOS`, `GCOV`, `GCOL`, `GOPA`, `GTRC`, the given ancillary chunks, `GEND`.
+/// Every payload is built first so that `gCRM` can state the exact size of the file it is
+/// part of.
 pub fn write_file<W: Write>(w: &mut W, records: &Records, opts: &WriteOptions) -> Result<u64> {
     if !records.is_consistent() {
         return Err(invalid("records do not match the header's count"));

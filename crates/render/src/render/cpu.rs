@@ -4,8 +4,8 @@
 //! the output, so bands can be rendered on different threads without sharing or
 //! `unsafe`. Inside a band, a Gaussian's box is cut to the columns that its ellipse
 //! reaches over the band's rows ([`band_columns`]) and the Gaussian binned to the tiles
-//! of [`TILE`] columns that they cross; a tile visits its list in stored order and evaluates only the pixels
-//! inside both the tile and the cut box. Which thread renders a band never changes the
+//! of [`TILE`] columns that they cross; a tile visits its list in stored order and
+//! evaluates only the pixels inside both the tile and the cut box. Which thread renders a band never changes the
 //! arithmetic, so the parallel and sequential builds give identical bits.
 
 use super::lanes::{Acc, Kernel, TILE_W};

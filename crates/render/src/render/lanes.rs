@@ -17,16 +17,17 @@
 //! dependency. AVX-512 is a build of its own because its 32 registers hold the
 //! polynomial's constants: 10.9 ms against 9.7 ms for kodim23 at 768×512 here.)
 //!
-//! Files with `GCRW` (spec §6.3.2) take the column rule instead: down each chunk column a
-//! lane's weight is the row above's times a ratio, and the ratio the row above's times
-//! `E(−C)`, so that a chunk-row costs two products where the rule of §6.3 costs the power
-//! and `E`. A lane evaluates `E` where it starts (its first row in the tile, or the row
-//! where a dark lane's power reaches the start level): kodim23 at 1 bpp starts lanes on
-//! 0.10 M of its 1.11 M chunk-rows, and its decode (parse and render, in process) takes
-//! 15.8 ms against 20.7 ms by §6.3. Tiles are [`BAND`] (32) rows, the bands of the rule
-//! in files written now (`GCRT`), so no weight is carried from one tile to the next; in
-//! a `GCRW` file's bands of 16 rows a column starts again at the tile's row 16. (The blending is a trait with inlined methods, not
-//! a closure: as a closure with two callers it was compiled apart from the
+//! Files with `GCRW` or `GCRT` (spec §6.3.2) take the column rule instead: down each
+//! chunk column a lane's weight is the row above's times a ratio, and the ratio the row
+//! above's times `E(−C)`, so that a chunk-row costs two products where the rule of §6.3
+//! costs the power and `E`. A lane evaluates `E` where it starts (its first row in the
+//! rule's band, or the row where a dark lane's power reaches the start level): in tiles
+//! and bands of 16 rows, kodim23 at 1 bpp started lanes on 0.10 M of its 1.11 M
+//! chunk-rows, and its decode (parse and render, in process) took 15.8 ms against 20.7 ms
+//! by §6.3. Tiles are [`BAND`] (32) rows, the bands of the rule in files written now
+//! (`GCRT`), so no weight is carried from one tile to the next; in a `GCRW` file's bands
+//! of 16 rows a column starts again at the tile's row 16. (The blending is a trait with
+//! inlined methods, not a closure: as a closure with two callers it was compiled apart from the
 //! `#[target_feature]` function, without AVX, and the loop called it for every chunk-row
 //! at half the speed. LLVM inlines some closures and not others; the hot ones here are
 //! functions.)
@@ -370,6 +371,7 @@ fn chunk_rows<const JOIN: bool, const CAP: bool, const COLUMNS: bool>(
     // once where it meets both (see `column_rows`), from the first row of each of the
     // rule's bands that the box's rows in the tile meet (one, unless the rule's bands
     // are shorter than the tile).
+    debug_assert_eq!(rect.y0 % band, 0, "a tile starts a band of the rule");
     let k = g.column_k();
     let first = f.lx0 / LANES;
     let mut y = f.ys.start;
@@ -393,6 +395,9 @@ fn lanes_mask(b: bool) -> u32 {
 
 // A tile row is two chunks, so that a box meets one chunk or both.
 const _: () = assert!(TILE_W == 2 * LANES);
+// A tile's rows are whole bands of every column rule (§6.3.2: 16 or 32 rows), so that a
+// rule's band never runs from one tile into the next.
+const _: () = assert!(BAND % 32 == 0 && BAND % 16 == 0);
 
 /// The column rule of spec §6.3.2 for footprint `f` on the `M` chunks of a tile row
 /// from tile-local column `start` (a multiple of [`LANES`]), `k = E(−C)`.

@@ -8,7 +8,8 @@
 //!   only place where a covariance becomes a conic and a pixel box, so other renderers
 //!   reuse it rather than re-deriving the clamps.
 //! * [`Projected::alpha_at`]: the per-pixel rule, written once, readably, and
-//!   [`Projected::weight_at`]: the column rule of files with `GCRW` (§6.3.2), as plainly.
+//!   [`Projected::weight_at`]: the column rule of files with `GCRW` or `GCRT` (§6.3.2),
+//!   as plainly.
 //! * `tiles`, `cpu` and `lanes`: the CPU renderer. Tiles only decide *which* Gaussians a
 //!   pixel visits (those whose pixel box holds it), never in what order, and `lanes`
 //!   evaluates eight pixels at once with the same binary32 operations, so the tiled result

@@ -209,10 +209,12 @@ pub(crate) fn term_bound([a, b, c]: [f64; 3], mx: f64, my: f64) -> f64 {
 /// bounded by `s` ([`term_bound`]). A pixel's binary32 power is off by less than 1e-6·s;
 /// a weight of the column rule (spec §6.3.2) in bands of up to 32 rows by less than 63
 /// such errors (its first power, and 31 times a step, whose terms are bounded as the
-/// power's) and 8e-5 (the rounding of up to 62 products, of 31 factors of the first
-/// ratio `E(D)`, and of `E(−C)` raised to up to the 465th power, each `E` within 1 ulp).
+/// power's) and 1e-4: in units `u = 2⁻²⁴`, the first `E(P)` and `E(D)` (2u each, with
+/// their products) and `E(D)` taken 31 times, `E(−C)` raised to up to the 465th power
+/// (2u each), and the rounding of each ratio `r·k`, carried into every later weight (465
+/// times), and of each weight's product (31): about 1,490u, 8.9e-5.
 pub(crate) fn log_weight_error(s: f64) -> f64 {
-    63e-6 * s + 8e-5
+    63e-6 * s + 1e-4
 }
 
 /// [`Projected::carried_throughout`] for a Gaussian centred at `mean` with `conic`, over
