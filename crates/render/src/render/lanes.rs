@@ -267,9 +267,9 @@ impl Kernel {
             // too: on an AMD EPYC with AVX-512 (Zen 4), one thread, kodim23 fitted in
             // `alpha` mode at 1 bpp rendered in 16.7 ms by the AVX2 build against 23.1 ms
             // by the AVX-512 one (`sum` by columns 6.4 against 6.1 ms, `alpha` per pixel
-            // 2.8 against 2.5 ms for a corpus file: those keep AVX-512). Not looked into:
-            // the two chunks' transmittances held in one 16-lane register and their
-            // masks are the likely cost. The bits are the same either way.
+            // 2.8 against 2.5 ms for a corpus file: those keep AVX-512). Why the AVX-512
+            // code of this loop is slower was not looked into. The bits are the same
+            // either way.
             #[cfg(target_arch = "x86_64")]
             Kernel::Avx512 if blend == Blend::Alpha && columns.is_some() => unsafe {
                 x86::tile_avx2(blend, columns, list, proj, rect, acc)
