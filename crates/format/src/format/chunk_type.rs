@@ -1,6 +1,7 @@
 //! The four-letter tag that names a chunk (spec §2): below the errors, which name the
 //! chunk they were found in, and the framing, which reads it.
 
+use crate::model::WeightRule;
 use std::fmt;
 
 /// A four-letter chunk type. Upper-case first letter: critical (a decoder that does not
@@ -29,6 +30,17 @@ impl ChunkType {
     pub const ENHANCER: ChunkType = ChunkType(*b"gENH");
     /// Reserved: the colour records as they were before enhancement.
     pub const ORIGINAL_COLORS: ChunkType = ChunkType(*b"gORC");
+
+    /// The chunk that says a file weighs by `rule` (spec §6.3.2), `None` for the
+    /// per-pixel rule, which no chunk announces. The reader and the writer both map
+    /// through it.
+    pub fn of_weight_rule(rule: WeightRule) -> Option<ChunkType> {
+        match rule {
+            WeightRule::PerPixel => None,
+            WeightRule::Columns => Some(ChunkType::COLUMN_WEIGHTS),
+            WeightRule::Columns32 => Some(ChunkType::COLUMN_WEIGHTS_32),
+        }
+    }
 
     pub fn is_critical(self) -> bool {
         self.0[0].is_ascii_uppercase()

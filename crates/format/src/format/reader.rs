@@ -161,23 +161,20 @@ impl<R: Read> Decoder<R> {
                     tone = Some(super::trc::parse(&c.data).map_err(here)?);
                 }
                 ChunkType::COLUMN_WEIGHTS | ChunkType::COLUMN_WEIGHTS_32 => {
-                    let rule = if c.ty == ChunkType::COLUMN_WEIGHTS {
-                        WeightRule::Columns
-                    } else {
-                        WeightRule::Columns32
-                    };
-                    match columns {
-                        None => columns = Some(rule),
-                        Some(seen) if seen == rule => once(true)?,
-                        // One column rule per file (spec §2.4).
-                        Some(_) => {
-                            return Err(Error::new(
-                                ErrorKind::ChunkOrder,
-                                "beside the other column rule's chunk (GCRW and GCRT)",
-                            )
-                            .at(Some(c.ty), offset))
-                        }
+                    let rule = [WeightRule::Columns, WeightRule::Columns32]
+                        .into_iter()
+                        .find(|&r| ChunkType::of_weight_rule(r) == Some(c.ty))
+                        .expect("a column rule's chunk");
+                    // One column rule per file (spec §2.4).
+                    if columns.is_some_and(|seen| seen != rule) {
+                        return Err(Error::new(
+                            ErrorKind::ChunkOrder,
+                            "beside the other column rule's chunk (GCRW and GCRT)",
+                        )
+                        .at(Some(c.ty), offset));
                     }
+                    once(columns.is_some())?;
+                    columns = Some(rule);
                 }
                 ChunkType::COMPRESSION_META => {
                     once(meta.is_some())?;

@@ -5,7 +5,6 @@ use super::error::{invalid, Result};
 use super::header::VERSION_MINOR_CODED;
 use super::meta::{CompressionMeta, MAX_SETTINGS_LEN};
 use super::records::{attribute_preamble_len, Records, METHOD_CODED};
-use crate::model::WeightRule;
 use std::io::Write;
 
 /// What goes into a file besides the records.
@@ -65,10 +64,8 @@ pub fn write_file<W: Write>(w: &mut W, records: &Records, opts: &WriteOptions) -
     let mut body: Vec<(ChunkType, Vec<u8>)> = Vec::new();
     // First after the header and `gCRM`, so that a streaming decoder knows the rule before
     // any Gaussian.
-    match records.weights {
-        WeightRule::PerPixel => {}
-        WeightRule::Columns => body.push((ChunkType::COLUMN_WEIGHTS, Vec::new())),
-        WeightRule::Columns32 => body.push((ChunkType::COLUMN_WEIGHTS_32, Vec::new())),
+    if let Some(ty) = ChunkType::of_weight_rule(records.weights) {
+        body.push((ty, Vec::new()));
     }
     let mut coded = false;
     for (ty, a) in attributes {

@@ -5,8 +5,9 @@
 //! `unsafe`. Inside a band, a Gaussian's box is cut to the columns that its ellipse
 //! reaches over the band's rows ([`band_columns`]) and the Gaussian binned to the tiles
 //! of [`TILE`] columns that they cross; a tile visits its list in stored order and
-//! evaluates only the pixels inside both the tile and the cut box. Which thread renders a band never changes the
-//! arithmetic, so the parallel and sequential builds give identical bits.
+//! evaluates only the pixels inside both the tile and the cut box. Which thread renders a
+//! band never changes the arithmetic, so the parallel and sequential builds give
+//! identical bits.
 
 use super::lanes::{Acc, Kernel, TILE_W};
 use super::project::{Projected, Rect};
@@ -381,7 +382,10 @@ fn thread_slot() -> usize {
 /// page faults), 0.7 ms for the 1024×768 one. (32 against 64 cost 1.0 ms more, measured
 /// before the freed memory was reused.)
 pub fn window_bands(parallel: bool) -> usize {
-    (3 * threads(parallel)).min(16)
+    const ROWS_PER_THREAD: usize = 96;
+    const MAX_ROWS: usize = 512;
+    let band = BAND as usize;
+    (ROWS_PER_THREAD / band * threads(parallel)).min(MAX_ROWS / band)
 }
 
 /// What every tile of one band needs to know.
@@ -460,6 +464,13 @@ mod tests {
         WeightRule::Columns,
         WeightRule::Columns32,
     ];
+
+    /// Each blend mode with each column rule.
+    fn blends_by_columns() -> impl Iterator<Item = (Blend, WeightRule)> {
+        [Blend::Sum, Blend::Alpha]
+            .into_iter()
+            .flat_map(|b| RULES[1..].iter().map(move |&r| (b, r)))
+    }
 
     fn render_both(blend: (Blend, WeightRule), w: u32, h: u32) -> (Vec<f32>, Vec<f32>) {
         let mut spec = SceneSpec::new(64, 48, 400, blend.0);
@@ -593,10 +604,7 @@ mod tests {
                 g.colors.push([rng.unit(), rng.unit() - 0.5, 1.0]);
             }
             g.opacity = Some((0..200).map(|_| rng.range(0.004, 1.0)).collect());
-            for (blend, rule) in [Blend::Sum, Blend::Alpha]
-                .into_iter()
-                .flat_map(|b| RULES[1..].iter().map(move |r| (b, r)))
-            {
+            for (blend, rule) in blends_by_columns() {
                 let scene = Scene {
                     width: 64,
                     height: 48,
@@ -604,11 +612,11 @@ mod tests {
                     cov_param: CovParam::Cholesky,
                     gaussians: g.clone(),
                     tone: None,
-                    weights: *rule,
+                    weights: rule,
                 };
                 for (w, h) in [(64, 48), (150, 110)] {
                     let proj = project_scene(&scene, w, h);
-                    let how = (blend, *rule);
+                    let how = (blend, rule);
                     let diff = unlike_the_rule(&proj, how, (w, h), Kernel::detect());
                     assert!(diff.is_none(), "seed {seed} {blend:?} {w}x{h} at {diff:?}");
                 }
@@ -621,10 +629,7 @@ mod tests {
     /// rounding of a difference of two powers), far below an 8-bit step.
     #[test]
     fn the_column_rule_stays_near_the_per_pixel_rule() {
-        for (blend, columns) in [Blend::Sum, Blend::Alpha]
-            .into_iter()
-            .flat_map(|b| RULES[1..].iter().map(move |&r| (b, r)))
-        {
+        for (blend, columns) in blends_by_columns() {
             let mut spec = SceneSpec::new(96, 64, 800, blend);
             spec.sigma_px = (0.3, 20.0);
             let scene = random_scene(9, spec);

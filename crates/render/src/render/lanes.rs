@@ -406,9 +406,9 @@ fn lanes_mask(b: bool) -> u32 {
 
 // A tile row is two chunks, so that a box meets one chunk or both.
 const _: () = assert!(TILE_W == 2 * LANES);
-// A tile's rows are whole bands of every column rule (§6.3.2: 16 or 32 rows), so that a
-// rule's band never runs from one tile into the next.
-const _: () = assert!(BAND % 32 == 0 && BAND % 16 == 0);
+// A tile's rows are whole bands of every column rule (§6.3.2: 16 or 32 rows, and 32 is a
+// multiple of 16), so that a rule's band never runs from one tile into the next.
+const _: () = assert!(BAND % 32 == 0);
 
 /// The column rule of spec §6.3.2 for footprint `f` on the `M` chunks of a tile row
 /// from tile-local column `start` (a multiple of [`LANES`]), `k = E(−C)`.
