@@ -329,9 +329,11 @@ impl Acc {
 
 /// One build of the loops: the blend mode and the weight rule picked once per tile, so
 /// that each combination is a loop of its own. `columns`: the rows of the column rule's
-/// bands, `None` for the per-pixel rule.
+/// bands, `None` for the per-pixel rule. `WIDE`: the AVX-512 build, whose mask registers
+/// join the per-pixel rule's tests into one mask (`JOIN` of [`Footprint::alphas_with`])
+/// and whose 16-lane registers take a tile row's two chunks at once (`sum` blending).
 #[inline(always)]
-fn tile<const JOIN: bool>(
+fn tile<const WIDE: bool>(
     blend: Blend,
     columns: Option<u32>,
     list: &[u32],
@@ -341,10 +343,10 @@ fn tile<const JOIN: bool>(
 ) {
     let band = columns.unwrap_or(BAND);
     match (blend, columns.is_some()) {
-        (Blend::Sum, false) => tile_sum::<JOIN, false>(list, proj, (rect, band), acc),
-        (Blend::Sum, true) => tile_sum::<JOIN, true>(list, proj, (rect, band), acc),
-        (Blend::Alpha, false) => tile_alpha::<JOIN, false>(list, proj, (rect, band), acc),
-        (Blend::Alpha, true) => tile_alpha::<JOIN, true>(list, proj, (rect, band), acc),
+        (Blend::Sum, false) => tile_sum::<WIDE, false>(list, proj, (rect, band), acc),
+        (Blend::Sum, true) => tile_sum::<WIDE, true>(list, proj, (rect, band), acc),
+        (Blend::Alpha, false) => tile_alpha::<WIDE, false>(list, proj, (rect, band), acc),
+        (Blend::Alpha, true) => tile_alpha::<WIDE, true>(list, proj, (rect, band), acc),
     }
 }
 
@@ -607,8 +609,11 @@ trait Blender {
     /// Whether the column rule blends a row of several chunks a chunk at a time, each
     /// chunk's alphas as soon as they are made, rather than all at once (the per-pixel
     /// rule blends one chunk at a time anyway). `sum` blending measured 4–5 % faster a
-    /// chunk at a time (kodim23 and a random scene, single thread); `alpha` blending
-    /// 9–11 % slower, its count of the pixels that stop then taken twice a row.
+    /// chunk at a time on the AVX2 build (kodim23 and a random scene, single thread;
+    /// kodim23 and kodim13 again on an AMD EPYC with AVX-512, 0.15–0.3 ms of 4.5–5 ms)
+    /// but slower on the AVX-512 one, where the two chunks' sums go through one 16-lane
+    /// register (0.17–0.2 ms, the same renders); `alpha` blending 9–11 % slower, its
+    /// count of the pixels that stop then taken twice a row.
     const BY_CHUNK: bool;
 
     /// Blend Gaussian `g`'s `alpha` into the `M` chunks of [`LANES`] pixels from `at` of
@@ -616,11 +621,12 @@ trait Blender {
     fn blend<const M: usize>(&mut self, g: &Projected, at: usize, alpha: &[V; M]);
 }
 
-/// `sum` blending: `acc += c·alpha`.
-struct Sum<'a>(&'a mut Acc);
+/// `sum` blending: `acc += c·alpha`, a chunk at a time unless `WIDE` (see
+/// [`Blender::BY_CHUNK`]).
+struct Sum<'a, const WIDE: bool>(&'a mut Acc);
 
-impl Blender for Sum<'_> {
-    const BY_CHUNK: bool = true;
+impl<const WIDE: bool> Blender for Sum<'_, WIDE> {
+    const BY_CHUNK: bool = !WIDE;
 
     #[inline(always)]
     fn blend<const M: usize>(&mut self, g: &Projected, at: usize, alpha: &[V; M]) {
@@ -682,17 +688,17 @@ impl Blender for Over<'_> {
 
 /// `sum` blending: `acc += c·alpha` for every Gaussian of the tile, in list order.
 #[inline(always)]
-fn tile_sum<const JOIN: bool, const COLUMNS: bool>(
+fn tile_sum<const WIDE: bool, const COLUMNS: bool>(
     list: &[u32],
     proj: &[Projected],
     (rect, band): (Rect, u32),
     acc: &mut Acc,
 ) {
-    let mut into = Sum(acc);
+    let mut into = Sum::<WIDE>(acc);
     for &k in list {
         let g = &proj[k as usize];
         if let Some(f) = Footprint::of(g, rect) {
-            chunk_rows::<JOIN, false, COLUMNS>(&f, (rect, band), &mut into);
+            chunk_rows::<WIDE, false, COLUMNS>(&f, (rect, band), &mut into);
         }
     }
 }
@@ -700,7 +706,7 @@ fn tile_sum<const JOIN: bool, const COLUMNS: bool>(
 /// `alpha` blending: front to back in list order, with per-pixel transmittance; the tile
 /// is done when no pixel of it takes light.
 #[inline(always)]
-fn tile_alpha<const JOIN: bool, const COLUMNS: bool>(
+fn tile_alpha<const WIDE: bool, const COLUMNS: bool>(
     list: &[u32],
     proj: &[Projected],
     (rect, band): (Rect, u32),
@@ -714,7 +720,7 @@ fn tile_alpha<const JOIN: bool, const COLUMNS: bool>(
     for &k in list {
         let g = &proj[k as usize];
         if let Some(f) = Footprint::of(g, rect) {
-            chunk_rows::<JOIN, true, COLUMNS>(&f, (rect, band), &mut into);
+            chunk_rows::<WIDE, true, COLUMNS>(&f, (rect, band), &mut into);
         }
         if into.live == 0 {
             break;
