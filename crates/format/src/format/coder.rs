@@ -236,14 +236,15 @@ pub const MAX_MAGNITUDE_BITS: usize = 49;
 #[derive(Clone)]
 pub struct Magnitude {
     unary: [Prob; MAX_MAGNITUDE_BITS],
-    mantissa: Vec<Prob>,
+    // A fixed array, so that the decoder's indices need no bounds check.
+    mantissa: Box<[Prob; MAX_MAGNITUDE_BITS * MAX_MAGNITUDE_BITS]>,
 }
 
 impl Default for Magnitude {
     fn default() -> Self {
         Magnitude {
             unary: [Prob::default(); MAX_MAGNITUDE_BITS],
-            mantissa: vec![Prob::default(); MAX_MAGNITUDE_BITS * MAX_MAGNITUDE_BITS],
+            mantissa: Box::new([Prob::default(); MAX_MAGNITUDE_BITS * MAX_MAGNITUDE_BITS]),
         }
     }
 }
@@ -322,10 +323,15 @@ impl Signed {
 /// context per bit position.
 pub const TREE_BITS: u8 = 8;
 
+/// Nodes of the deepest [`Tree`], and room for its last level's children (see `get`).
+const TREE_NODES: usize = 2 << TREE_BITS;
+
 #[derive(Clone)]
 pub struct Tree {
     bits: u8,
-    nodes: Vec<Prob>,
+    // A fixed array, so that an index masked to it needs no bounds check in the decoder's
+    // loop.
+    nodes: Box<[Prob; TREE_NODES]>,
     low: Vec<Prob>,
 }
 
@@ -334,8 +340,7 @@ impl Tree {
         let top = bits.min(TREE_BITS);
         Tree {
             bits,
-            // Nodes 1..2^top, and room for the last level's children (see `get`).
-            nodes: vec![Prob::default(); 2 << top],
+            nodes: Box::new([Prob::default(); TREE_NODES]),
             low: vec![Prob::default(); usize::from(bits - top)],
         }
     }
@@ -366,9 +371,13 @@ impl Tree {
             // Both children's contexts are read while this node's decision is made, so
             // that the next decision waits for a select, not a load. (The last level's
             // children are the padding past the tree, never decided.)
-            let children = [self.nodes[2 * node], self.nodes[2 * node + 1]];
+            // (`node` stays below 2^top ≤ TREE_NODES / 2: the masks only tell the compiler.)
+            let children = [
+                self.nodes[(2 * node) % TREE_NODES],
+                self.nodes[(2 * node + 1) % TREE_NODES],
+            ];
             let bit = d.decide(&mut p);
-            self.nodes[node] = p;
+            self.nodes[node % TREE_NODES] = p;
             node = 2 * node + usize::from(bit);
             p = children[usize::from(bit)];
         }
