@@ -19,6 +19,7 @@
 use super::project::{offset, term_bound, Projected};
 use super::rounding::{ceil, floor};
 use super::TILE;
+use gsi_format::contract::EXTENT_SIGMAS;
 use std::ops::Range;
 
 /// Counting sort of items into `slots` lists, each list in the order `items` visits them.
@@ -110,6 +111,19 @@ pub fn band_columns(g: &Projected, rows: Range<u32>) -> Option<(u32, u32)> {
     let det = a * c - bb * bb;
     if !(det > 0.0 && a > 0.0 && c > 0.0 && t.is_finite()) {
         return whole;
+    }
+    // Where the band's rows hold the two rows at which the ellipse reaches furthest left
+    // and right (`y = ±ytop`, below), and it reaches past the box there (its half-width
+    // `√(t·C/det)` is `√t` standard deviations, the box's [`EXTENT_SIGMAS`]), it keeps
+    // the whole box: so said without the square roots, as for most of the Gaussians of a
+    // band that holds their middle rows. (Keeping columns is always exact.)
+    let (up, down) = (-dys[0], dys[1]);
+    let reach_sq = f64::from(EXTENT_SIGMAS * EXTENT_SIGMAS);
+    if up >= 0.0 && down >= 0.0 && t >= reach_sq {
+        let m = up.min(down);
+        if bb * bb * t <= det * c * (m * m) {
+            return whole;
+        }
     }
     // The ellipse `Q ≤ t` spans rows `|y| ≤ ymax`; at row `y` its columns run from
     // `(−B·y − w)/A` to `(−B·y + w)/A`, `w = sqrt(A·t − det·y²)`. Its right end is
