@@ -15,7 +15,8 @@
 //! rather than a SIMD crate: the loops are plain arrays that LLVM vectorizes for whatever
 //! the function is compiled for, which keeps one copy of the arithmetic and adds no
 //! dependency. AVX-512 is a build of its own because its 32 registers hold the
-//! polynomial's constants: 10.9 ms against 9.7 ms for kodim23 at 768×512 here.)
+//! polynomial's constants: 10.9 ms against 9.7 ms for kodim23 at 768×512 here; its
+//! 16-lane registers also take a tile row of `sum` at once (`Blender::BY_CHUNK`).)
 //!
 //! Files with `GCRW` or `GCRT` (spec §6.3.2) take the column rule instead: down each
 //! chunk column a lane's weight is the row above's times a ratio, and the ratio the row
@@ -612,7 +613,7 @@ trait Blender {
     /// chunk at a time on the AVX2 build (kodim23 and a random scene, single thread;
     /// kodim23 and kodim13 again on an AMD EPYC with AVX-512, 0.15–0.3 ms of 4.5–5 ms)
     /// but slower on the AVX-512 one, where the two chunks' sums go through one 16-lane
-    /// register (0.17–0.2 ms, the same renders); `alpha` blending 9–11 % slower, its
+    /// register (0.3 ms, the same renders); `alpha` blending 9–11 % slower, its
     /// count of the pixels that stop then taken twice a row.
     const BY_CHUNK: bool;
 
