@@ -611,7 +611,8 @@ trait Blender {
     /// chunk's alphas as soon as they are made, rather than all at once (the per-pixel
     /// rule blends one chunk at a time anyway). `sum` blending measured 4–5 % faster a
     /// chunk at a time on the AVX2 build (kodim23 and a random scene, single thread;
-    /// kodim23 and kodim13 again on an AMD EPYC with AVX-512, 0.15–0.3 ms of 4.5–5 ms)
+    /// kodim23 and kodim13 again on an AMD EPYC with AVX-512, 0.14–0.46 ms of 6–7.6 ms
+    /// of parse and render)
     /// but slower on the AVX-512 one, where the two chunks' sums go through one 16-lane
     /// register (0.3 ms, the same renders); `alpha` blending 9–11 % slower, its
     /// count of the pixels that stop then taken twice a row.

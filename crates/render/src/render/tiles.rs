@@ -115,8 +115,8 @@ pub fn band_columns(g: &Projected, rows: Range<u32>) -> Option<(u32, u32)> {
     // Where the band's rows hold the two rows at which the ellipse reaches furthest left
     // and right (`y = ±ytop`, below), and it reaches past the box there (its half-width
     // `√(t·C/det)` is `√t` standard deviations, the box's [`EXTENT_SIGMAS`]), it keeps
-    // the whole box: so said without the square roots, as for most of the Gaussians of a
-    // band that holds their middle rows. (Keeping columns is always exact.)
+    // the whole box: so said without the square roots, as for a Gaussian whose middle
+    // rows the band holds. (Keeping columns is always exact.)
     let (up, down) = (-dys[0], dys[1]);
     let reach_sq = f64::from(EXTENT_SIGMAS * EXTENT_SIGMAS);
     if up >= 0.0 && down >= 0.0 && t >= reach_sq {
