@@ -129,7 +129,7 @@ fn render_gpu(_: &mut Criterion) {}
 
 /// Whole decodes (parse, dequantize, CPU render at the file's size) of the files named in
 /// `GSI_BENCH_FILES` (comma-separated; skipped when unset): real fitted files, for
-/// instance one written with method 2 and the same codes rewritten in the 1.0 codings by
+/// instance one written with method 3 and the same codes rewritten in the 1.0 codings by
 /// `cargo run --release --example recode`, measured in the same run. Beside them, the
 /// same files parsed and dequantized alone (`parse_file`): a random scene's codes are
 /// not what a fitted file's range coder reads.

@@ -1,5 +1,5 @@
 //! Rewrite a .gsi file's attributes with the 1.0 codings (stored or zstd, `--packed`) or
-//! with method 2 where it is smaller (`--coded`, the encoder's choice), keeping every
+//! with method 3 where it is smaller (`--coded`, the encoder's choice), keeping every
 //! code, and print the bits per Gaussian of each attribute before and after. The codes,
 //! hence the pixels, do not change: only their bytes do. A `sum` file is put in curve order
 //! for `--coded`, as the encoder writes it.

@@ -43,12 +43,16 @@ mod corpus {
         }
     }
 
-    /// `records` with every attribute in method 2 (§5.4) and the given modes (positions,
-    /// covariance, colours, opacity), as version 1.1 and with no `gCRM`: each mode meets
-    /// the decoder whether or not the encoder would have chosen it.
-    fn coded(records: &Records, modes: [&[u8]; 4]) -> Vec<u8> {
+    /// `records` with every attribute in `method` (2, §5.4, or 3, §5.4.4) and the given
+    /// modes (positions, covariance, colours, opacity), as the minor version that method
+    /// needs and with no `gCRM`: each mode meets the decoder whether or not the encoder
+    /// would have chosen it.
+    fn coded(records: &Records, modes: [&[u8]; 4], method: u8) -> Vec<u8> {
         let mut header = records.header;
-        header.version_minor = format::VERSION_MINOR_CODED;
+        header.version_minor = match method {
+            format::METHOD_CODED => format::VERSION_MINOR_CODED,
+            _ => format::VERSION_MINOR_CODED_RAW,
+        };
         let attributes = [
             (ChunkType::POSITIONS, Some(&records.positions), modes[0]),
             (ChunkType::COVARIANCE, Some(&records.covariance), modes[1]),
@@ -58,7 +62,7 @@ mod corpus {
         let mut chunks = vec![(ChunkType::HEADER, header.to_bytes().to_vec())];
         for (ty, a, m) in attributes {
             if let Some(a) = a {
-                chunks.push((ty, a.to_coded_payload(m).expect("valid modes")));
+                chunks.push((ty, a.to_coded_payload(m, method).expect("valid modes")));
             }
         }
         chunks.push((ChunkType::END, Vec::new()));
@@ -155,11 +159,13 @@ mod corpus {
         });
         // Method 2 (§5.4): a `sum` file along its Morton curve as the encoder writes it,
         // and files in every mode, at the widest and at no depth.
+        const M2: u8 = format::METHOD_CODED;
+        const M3: u8 = format::METHOD_CODED_RAW;
         let mut sorted = random(14, spec(192, 128, 3000, Sum, Lsr, false));
         sorted.sort_spatially();
         out.push(CorpusFile {
             name: "coded-sum-lsr-3000-morton.gsi".into(),
-            bytes: coded(&sorted, [&[3, 3], &[0, 1, 2], &[0, 1, 1], &[]]),
+            bytes: coded(&sorted, [&[3, 3], &[0, 1, 2], &[0, 1, 1], &[]], M2),
             expect: None,
         });
         out.push(CorpusFile {
@@ -167,6 +173,23 @@ mod corpus {
             bytes: coded(
                 &random(15, spec(96, 64, 500, Alpha, Cholesky, true)),
                 [&[2, 2], &[2, 0, 1], &[0, 2, 1], &[2]],
+                M2,
+            ),
+            expect: None,
+        });
+        // Method 3 (§5.4.4), version 1.6: the same, with mode 4 (raw) where an encoder
+        // writes it (an angle) and elsewhere.
+        out.push(CorpusFile {
+            name: "coded3-sum-lsr-3000-morton.gsi".into(),
+            bytes: coded(&sorted, [&[3, 3], &[0, 0, 4], &[0, 1, 1], &[]], M3),
+            expect: None,
+        });
+        out.push(CorpusFile {
+            name: "coded3-alpha-cholesky-500-every-mode.gsi".into(),
+            bytes: coded(
+                &random(15, spec(96, 64, 500, Alpha, Cholesky, true)),
+                [&[2, 2], &[4, 2, 1], &[0, 1, 2], &[4]],
+                M3,
             ),
             expect: None,
         });
@@ -182,20 +205,32 @@ mod corpus {
         wide_records.sort_spatially();
         out.push(CorpusFile {
             name: "coded-sum-24-bit.gsi".into(),
-            bytes: coded(&wide_records, [&[3, 3], &[0, 1, 0], &[2, 1, 1], &[0]]),
+            bytes: coded(&wide_records, [&[3, 3], &[0, 1, 0], &[2, 1, 1], &[0]], M2),
             expect: None,
         });
         out.push(CorpusFile {
+            name: "coded3-sum-24-bit.gsi".into(),
+            bytes: coded(&wide_records, [&[3, 3], &[0, 1, 4], &[2, 1, 1], &[0]], M3),
+            expect: None,
+        });
+        let empty = random(17, spec(32, 24, 0, Sum, Lsr, false));
+        out.push(CorpusFile {
             name: "coded-empty-0-gaussians.gsi".into(),
-            bytes: coded(
-                &random(17, spec(32, 24, 0, Sum, Lsr, false)),
-                [&[3, 3], &[0, 0, 0], &[0, 0, 0], &[]],
-            ),
+            bytes: coded(&empty, [&[3, 3], &[0, 0, 0], &[0, 0, 0], &[]], M2),
+            expect: None,
+        });
+        out.push(CorpusFile {
+            name: "coded3-empty-0-gaussians.gsi".into(),
+            bytes: coded(&empty, [&[3, 3], &[0, 0, 4], &[0, 0, 0], &[]], M3),
             expect: None,
         });
         out.push(CorpusFile {
             name: "coded-degenerate-covariances.gsi".into(),
-            bytes: coded(&degenerate(Lsr), [&[2, 2], &[0, 1, 2], &[0, 1, 1], &[2]]),
+            bytes: coded(
+                &degenerate(Lsr),
+                [&[2, 2], &[0, 1, 2], &[0, 1, 1], &[2]],
+                M2,
+            ),
             expect: None,
         });
         // Stage 2: a file enhanced in the container (gENH and gORC before GEND); the
@@ -826,6 +861,7 @@ mod corpus {
             }),
         ));
         coded_invalid(&base_records, &mut files);
+        coded_raw_invalid(&base_records, &mut files);
         files
             .into_iter()
             .map(|(kind, what, bytes)| CorpusFile {
@@ -841,7 +877,7 @@ mod corpus {
     fn coded_invalid(records: &Records, files: &mut Vec<(ErrorKind, &'static str, Vec<u8>)>) {
         use ErrorKind as K;
         let n = records.header.count as usize;
-        let base = coded(records, [&[3, 3], &[0, 1, 2], &[0, 1, 1], &[2]]);
+        let base = coded(records, [&[3, 3], &[0, 1, 2], &[0, 1, 1], &[2]], 2);
         let parts = chunks(&base);
         let at = |ty: ChunkType| parts.iter().position(|(t, _)| *t == ty).expect("chunk");
         let with = |ty: ChunkType, payload: Vec<u8>| {
@@ -899,7 +935,7 @@ mod corpus {
                 quantizers: vec![q; comps],
                 codes: all,
             };
-            let mut d = a.to_coded_payload(modes).expect("valid modes");
+            let mut d = a.to_coded_payload(modes, 2).expect("valid modes");
             d[1 + 9 * k] = 3;
             let packed = (n * (4 * comps - 1)).div_ceil(8) as u32;
             let at = 2 + 9 * comps;
@@ -920,6 +956,64 @@ mod corpus {
                 ChunkType::POSITIONS,
                 narrowed(1, &|i| if i == 2 { 12 } else { 3 }, &[3, 3]),
             )
+        }));
+        // Mode 4 is method 3's alone.
+        files.push((K::InvalidValue, "coded-raw-mode-in-method-2", {
+            edit(ChunkType::COLORS, &|d| d[35] = 4)
+        }));
+    }
+
+    /// Malformed payloads of method 3 (§5.4.4), each in a file that is otherwise `records`
+    /// coded and valid. The `GCOV` payload (three components) has its method at 28, its
+    /// modes at 33, the length of its raw bits at 36, its stream from 40; its last
+    /// component is raw, so its raw bits end in padding.
+    fn coded_raw_invalid(records: &Records, files: &mut Vec<(ErrorKind, &'static str, Vec<u8>)>) {
+        use ErrorKind as K;
+        let base = coded(records, [&[3, 3], &[0, 1, 4], &[0, 1, 1], &[4]], 3);
+        let parts = chunks(&base);
+        let at = |ty: ChunkType| parts.iter().position(|(t, _)| *t == ty).expect("chunk");
+        let edit = |ty: ChunkType, f: &dyn Fn(&mut Vec<u8>)| {
+            let mut p = parts.clone();
+            f(&mut p[at(ty)].1);
+            assemble(&p)
+        };
+        let raw_len = |d: &[u8]| u32::from_be_bytes(d[36..40].try_into().expect("4 bytes"));
+        let set_raw_len = |d: &mut Vec<u8>, n: u32| d[36..40].copy_from_slice(&n.to_be_bytes());
+        assert_eq!(parts[at(ChunkType::COVARIANCE)].1[28], 3, "method 3");
+        files.push((K::Decompression, "coded3-raw-length-past-payload", {
+            edit(ChunkType::COVARIANCE, &|d| {
+                let n = (d.len() - 40 + 1) as u32;
+                set_raw_len(d, n)
+            })
+        }));
+        files.push((K::Decompression, "coded3-raw-bits-cut", {
+            edit(ChunkType::COVARIANCE, &|d| {
+                let n = raw_len(d);
+                d.pop();
+                set_raw_len(d, n - 1);
+            })
+        }));
+        files.push((K::Decompression, "coded3-raw-bytes-left", {
+            edit(ChunkType::COVARIANCE, &|d| {
+                let n = raw_len(d);
+                d.push(0);
+                set_raw_len(d, n + 1);
+            })
+        }));
+        files.push((K::Decompression, "coded3-raw-padding-ones", {
+            edit(ChunkType::COVARIANCE, &|d| {
+                *d.last_mut().expect("raw bytes") |= 1
+            })
+        }));
+        files.push((K::Decompression, "coded3-stream-bytes-left", {
+            // A byte moved from the raw bits to the end of the stream.
+            edit(ChunkType::COVARIANCE, &|d| {
+                let n = raw_len(d);
+                set_raw_len(d, n - 1)
+            })
+        }));
+        files.push((K::InvalidValue, "coded3-mode-5", {
+            edit(ChunkType::COVARIANCE, &|d| d[35] = 5)
         }));
     }
 

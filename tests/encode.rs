@@ -242,7 +242,7 @@ fn opacity_is_not_stored_when_not_needed() {
 }
 
 #[test]
-fn sum_files_are_written_along_the_curve_with_method_2() {
+fn sum_files_are_written_along_the_curve_with_method_3() {
     let t = scene_like(128, 96);
     let e = encode(
         &t,
@@ -254,7 +254,7 @@ fn sum_files_are_written_along_the_curve_with_method_2() {
     let f = read_file(&e.bytes[..], Limits::default()).unwrap();
     assert_eq!(
         f.records.header.version_minor,
-        gsi::format::VERSION_MINOR_CODED
+        gsi::format::VERSION_MINOR_CODED_RAW
     );
     let n = f.records.header.count as usize;
     let (u, v) = f.records.positions.codes.split_at(n);
@@ -281,7 +281,7 @@ fn sum_files_are_written_along_the_curve_with_method_2() {
     .sum();
     assert!(
         coded < packed,
-        "method 2: {coded} bytes, 1.0 codings {packed}"
+        "method 3: {coded} bytes, 1.0 codings {packed}"
     );
     assert!(e.float_psnr.is_finite() && e.psnr.is_finite());
     // Angles are stored within a quarter turn, in 7 bits; the log-scales take 6.

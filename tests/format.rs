@@ -37,8 +37,10 @@ fn spec_worked_example_matches_the_encoder() {
     assert_eq!(spec_hexdump(), format::tests_support::tiny_file());
 }
 
+/// §9.1 and §9.2: each coded payload of the spec decodes to its codes, and the encoder
+/// writes exactly those bytes in the same method and modes.
 #[test]
-fn spec_method_2_examples_decode() {
+fn spec_method_2_and_3_examples_decode() {
     let q = |bits| format::Quantizer {
         bits,
         min: 0.0,
@@ -52,11 +54,21 @@ fn spec_method_2_examples_decode() {
         quantizers: vec![q(3), q(3), q(3)],
         codes: vec![7, 1, 4, 6, 1, 5, 6, 0, 5],
     };
-    for (nth, attribute, modes) in [(1, &pos, &[3u8, 3][..]), (2, &col, &[0, 1, 2][..])] {
-        let bytes = spec_block("### 9.1 Method 2 payloads", nth);
+    let cov = format::Attribute {
+        quantizers: vec![q(7), q(7), q(7)],
+        codes: vec![100, 37, 64, 101, 36, 70, 5, 127, 64],
+    };
+    let examples = [
+        ("### 9.1 Method 2 payloads", 2, 1, &pos, &[3u8, 3][..]),
+        ("### 9.1 Method 2 payloads", 2, 2, &col, &[0, 1, 2][..]),
+        ("### 9.2 Method 3 payloads", 3, 1, &pos, &[3, 3][..]),
+        ("### 9.2 Method 3 payloads", 3, 2, &cov, &[0, 1, 4][..]),
+    ];
+    for (section, method, nth, attribute, modes) in examples {
+        let bytes = spec_block(section, nth);
         let decoded = format::Attribute::from_payload(&bytes, attribute.components(), 3).unwrap();
-        assert_eq!(&decoded, attribute, "example {nth}");
-        assert_eq!(attribute.to_coded_payload(modes).unwrap(), bytes);
+        assert_eq!(&decoded, attribute, "{section}, example {nth}");
+        assert_eq!(attribute.to_coded_payload(modes, method).unwrap(), bytes);
     }
 }
 

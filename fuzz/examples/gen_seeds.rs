@@ -5,7 +5,7 @@
 //! `cargo run --manifest-path fuzz/Cargo.toml --features seeds --example gen_seeds [OUT_DIR]`
 //!
 //! `parse/` gets the files as they are; `decode/` gets each with a two-byte prefix that
-//! the `decode` target reads as its output size. `coded/` gets method-2 payloads in the
+//! the `decode` target reads as its output size. `coded/` gets method-2 and method-3 payloads in the
 //! `coded` target's input layout: positions in Morton mode, covariance and colours in
 //! mixed modes, at several depths.
 
@@ -173,14 +173,18 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         );
         let mut records = Records::from_scene(&scene, bits);
         records.sort_spatially();
-        for (attr, a, modes) in [
-            ("pos", &records.positions, &[3u8, 3][..]),
-            ("cov", &records.covariance, &[0, 1, 2][..]),
-            ("col", &records.colors, &[2, 1, 1][..]),
+        for (method, attr, a, modes) in [
+            (2, "pos", &records.positions, &[3u8, 3][..]),
+            (2, "cov", &records.covariance, &[0, 1, 2][..]),
+            (2, "col", &records.colors, &[2, 1, 1][..]),
+            (3, "pos3", &records.positions, &[3u8, 3][..]),
+            (3, "cov3", &records.covariance, &[0, 1, 4][..]),
+            (3, "col3", &records.colors, &[2, 1, 1][..]),
         ] {
-            let payload = a.to_coded_payload(modes).expect("valid modes");
+            let payload = a.to_coded_payload(modes, method).expect("valid modes");
             let k = a.components();
-            let mut input = vec![(k - 1) as u8];
+            // The top bit chooses method 3.
+            let mut input = vec![(k - 1) as u8 | if method == 3 { 0x80 } else { 0 }];
             input.extend((a.count() as u16).to_be_bytes());
             input.extend(a.quantizers.iter().map(|q| q.bits));
             // Modes and stream follow the preamble unchanged.

@@ -1,8 +1,10 @@
-//! Any bytes as the stream of a method-2 attribute payload (format-spec.md §5.4), behind a
-//! preamble the input chooses: `Ok` or `Err`, never a panic, a hang or an allocation
-//! beyond the codes the count declares. Input: components (1 + byte % 3), count (u16,
-//! big-endian, at most 4096), one byte per component for its width (% 25), one mode byte
-//! per component (any value, so invalid modes are met too), then the stream.
+//! Any bytes as the coded data of a method-2 or method-3 attribute payload (format-spec.md
+//! §5.4, §5.4.4), behind a preamble the input chooses: `Ok` or `Err`, never a panic, a
+//! hang or an allocation beyond the codes the count declares. Input: a byte whose top bit
+//! chooses method 3 and whose low bits the components (1 + (byte & 0x7F) % 3), count
+//! (u16, big-endian, at most 4096), one byte per component for its width (% 25), one mode
+//! byte per component (any value, so invalid modes are met too), then the rest of the
+//! data (method 2: the stream; method 3: the raw bits' length, the stream, the raw bits).
 //!
 //! An accepted payload must hold codes within each quantizer's range, and coding those
 //! codes again in the same modes must give a payload that decodes to the same codes.
@@ -16,7 +18,8 @@ fuzz_target!(|data: &[u8]| {
     let [k, c0, c1, rest @ ..] = data else {
         return;
     };
-    let k = 1 + usize::from(*k % 3);
+    let method = if *k & 0x80 != 0 { 3 } else { 2 };
+    let k = 1 + usize::from((*k & 0x7F) % 3);
     let count = u32::from(u16::from_be_bytes([*c0, *c1])).min(4096);
     if rest.len() < 2 * k {
         return;
@@ -45,7 +48,7 @@ fuzz_target!(|data: &[u8]| {
         payload.extend(q.min.to_be_bytes());
         payload.extend(q.max.to_be_bytes());
     }
-    payload.push(2);
+    payload.push(method);
     payload.extend(((u64::from(count) * bits_total).div_ceil(8) as u32).to_be_bytes());
     payload.extend_from_slice(modes);
     payload.extend_from_slice(stream);
@@ -58,7 +61,9 @@ fuzz_target!(|data: &[u8]| {
     for (plane, q) in a.codes.chunks(n.max(1)).zip(&a.quantizers) {
         assert!(plane.iter().all(|&c| c <= q.max_code()), "code past {q:?}");
     }
-    let again = a.to_coded_payload(modes).expect("accepted modes are valid");
+    let again = a
+        .to_coded_payload(modes, method)
+        .expect("accepted modes are valid");
     let back = Attribute::from_payload(&again, k, count).expect("re-coded payload decodes");
     assert_eq!(back, a, "codes change through a re-code");
 });

@@ -21,14 +21,15 @@ fuzz_target!(|data: &[u8]| {
     }
 
     // Whatever the decoder accepts, the encoder writes back to the same records (codes,
-    // quantizers, header fields) and ancillary chunks, with method 2 where the file is of
-    // the minor that may use it. A fast zstd level keeps runs quick.
+    // quantizers, header fields) and ancillary chunks, with method 3 where the file is of
+    // the minor that may use it (a file of an earlier minor is written without it, so that
+    // its minor stays). A fast zstd level keeps runs quick.
     let opts = WriteOptions {
         zstd_level: 1,
         psnr: None,
         settings: None,
         ancillary: file.ancillary.clone(),
-        context_coding: file.records.header.version_minor >= gsi::format::VERSION_MINOR_CODED,
+        context_coding: file.records.header.version_minor >= gsi::format::VERSION_MINOR_CODED_RAW,
     };
     let bytes = to_bytes(&file.records, &opts).expect("re-encoding a parsed file");
     let again = read_file(&bytes[..], gsi::format::Limits::unlimited())

@@ -130,7 +130,7 @@ struct Row {
     bits_packed: [f64; 3],
 }
 
-/// Bits per Gaussian of each attribute payload, with or without method 2.
+/// Bits per Gaussian of each attribute payload, with or without the coded method (3).
 fn attribute_bits(r: &gsi::format::Records, coded: bool) -> [f64; 3] {
     let n = f64::from(r.header.count.max(1));
     [&r.positions, &r.covariance, &r.colors].map(|a| {
@@ -271,7 +271,7 @@ fn markdown(args: &Args, rows: &[Row], curve: Option<&Curves>, stamp: &(String, 
             mean(g.iter().map(|r| f64::from(r.gaussians))),
         );
     }
-    let _ = writeln!(s, "\nBits per Gaussian by attribute (chunk payloads, preambles included), as written (method 2 where smaller, `sum` files in Morton order) and as the 1.0 codings (stored or zstd) would write the same codes; quantization loss is the float fit's PSNR minus the stored file's (negative where quantization-aware fine-tuning left the float parameters tuned to their quantized values):\n");
+    let _ = writeln!(s, "\nBits per Gaussian by attribute (chunk payloads, preambles included), as written (method 3 where smaller, `sum` files in Morton order) and as the 1.0 codings (stored or zstd) would write the same codes; quantization loss is the float fit's PSNR minus the stored file's (negative where quantization-aware fine-tuning left the float parameters tuned to their quantized values):\n");
     let _ = writeln!(s, "| set | target bpp | GPOS | GCOV | GCOL | total | total, 1.0 coding | quantization loss dB |");
     let _ = writeln!(s, "|---|---|---|---|---|---|---|---|");
     for (set, bpp) in &groups {

@@ -282,7 +282,7 @@ pub fn default_bits(width: u32, height: u32, blend: Blend) -> BitDepths {
 }
 
 /// Bytes per Gaussian of the codes bit-packed (§5.3): the first guess of N under a byte
-/// budget, before [`coded_bytes_per_gaussian`] measures what method 2 makes of them.
+/// budget, before [`coded_bytes_per_gaussian`] measures what method 3 makes of them.
 fn bytes_per_gaussian(bits: BitDepths, blend: Blend) -> f32 {
     let b =
         2 * u32::from(bits.position) + 3 * u32::from(bits.covariance) + 3 * u32::from(bits.color);
@@ -303,7 +303,7 @@ fn shrunk(n: usize, bpp: f32, budget: f32, px: f32) -> usize {
 }
 
 /// Bytes per Gaussian of `scene`'s attribute payloads as [`finish`] writes them
-/// (quantized with `bits`, in curve order, method 2 where it is smaller).
+/// (quantized with `bits`, in curve order, method 3 where it is smaller).
 fn coded_bytes_per_gaussian(scene: &Scene, bits: BitDepths) -> f32 {
     let mut r = Records::from_scene(scene, bits);
     r.sort_spatially();
@@ -1117,7 +1117,7 @@ pub fn encode(
     let placed = |n| init::initialize(first, n, opts.init, opts.blend, opts.seed);
     let mut params = placed(n);
     if let Budget::Bpp(b) = opts.budget {
-        // Method 2's cost depends on the image: measure it on the initial Gaussians, which
+        // Method 3's cost depends on the image: measure it on the initial Gaussians, which
         // code within about 2 % of the fitted ones (1.5 % more on kodim05, 1.1 % on
         // kodim23), and place again the count that this cost fits in the budget. Measured
         // before the colour solve, which then runs once.

@@ -1,5 +1,6 @@
-//! Compression method 2 (spec §5.4): each component's codes predicted from what is
-//! already decoded and range-coded with adaptive contexts.
+//! Compression methods 2 and 3 (spec §5.4): each component's codes predicted from what
+//! is already decoded and range-coded with adaptive contexts; method 3 keeps the bits that
+//! contexts do not help with raw, beside the range-coded stream (§5.4.4).
 //!
 //! Where the bits go, measured on Kodak at 1 bpp: positions are the largest field, and
 //! in curve order (the encoder writes `sum` files along a Morton curve, where the order of
@@ -10,9 +11,21 @@
 //! that codes it in fewest bits: its codes alone, its residual from the previous component
 //! of the same Gaussian, or its residual from the previous Gaussian.
 
-use super::coder::{Decoder, Encoder, Meter, Signed, Sink, Tree};
+use super::coder::{
+    Decoder, Encoder, Magnitude, MagnitudeCode, Meter, Signed, Sink, SplitMagnitude, Tree,
+};
 use super::error::{invalid, Error, ErrorKind, Result};
 use super::quant::Quantizer;
+
+/// Which of the two coded methods (the payload's method byte, §5.1).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Coding {
+    /// Method 2 (§5.4): every bit a decision.
+    Method2,
+    /// Method 3 (§5.4.4, version 1.6): method 2's modes and predictions, the low bits of
+    /// trees and magnitudes raw, a Morton step's `e` through a tree, and mode 4.
+    Method3,
+}
 
 /// The code itself, through a `Tree`.
 pub const MODE_DIRECT: u8 = 0;
@@ -23,6 +36,46 @@ pub const MODE_ALONG: u8 = 2;
 /// Components 0 and 1 of a two-component attribute as one Morton key, coded as the
 /// signed step from the previous Gaussian's key.
 pub const MODE_MORTON: u8 = 3;
+/// Method 3 only: the code's bits, raw (a component with no structure to model).
+pub const MODE_RAW: u8 = 4;
+
+/// How a method turns codes into decisions and raw bits: the binarizations of §5.4.2
+/// (method 2) or §5.4.4 (method 3), as types, so that one loop serves both and each
+/// method's loop is compiled for its own.
+trait Binarization {
+    /// The magnitude of a residual of modes 1 and 2.
+    type Residual: MagnitudeCode;
+    /// The magnitude of a step of mode 3.
+    type Step: MagnitudeCode;
+    /// Method 3: the data starts with the length of its raw bits, and mode 4 is allowed.
+    const RAW: bool;
+    /// The tree of mode 0 for codes of `bits` bits.
+    fn tree(bits: u8) -> Tree;
+}
+
+/// §5.4.2: trees and signed values, every bit a decision.
+struct Method2;
+
+impl Binarization for Method2 {
+    type Residual = Magnitude;
+    type Step = Magnitude;
+    const RAW: bool = false;
+    fn tree(bits: u8) -> Tree {
+        Tree::new(bits)
+    }
+}
+
+/// §5.4.4: split trees and magnitudes, a step's `e` through a tree.
+struct Method3;
+
+impl Binarization for Method3 {
+    type Residual = SplitMagnitude<false>;
+    type Step = SplitMagnitude<true>;
+    const RAW: bool = true;
+    fn tree(bits: u8) -> Tree {
+        Tree::split(bits)
+    }
+}
 
 /// Interleave two codes into a Morton key: bit `j` of `u` becomes bit `2j`, bit `j` of
 /// `v` bit `2j + 1`.
@@ -57,23 +110,31 @@ fn across(from: &Quantizer, to: &Quantizer, q: u32) -> u32 {
     to.quantize(from.dequantize(q))
 }
 
-/// Code `count` planar codes (component 0 of every Gaussian, then component 1, …):
-/// the mode bytes, then the range-coded stream, each component in the mode that codes it
-/// in fewest bits.
-pub fn encode(codes: &[u32], count: usize, qs: &[Quantizer]) -> Vec<u8> {
+/// Code `count` planar codes (component 0 of every Gaussian, then component 1, …) by
+/// `coding`: the mode bytes, then the coded data, each component in the mode that codes
+/// it in fewest bits.
+pub fn encode(codes: &[u32], count: usize, qs: &[Quantizer], coding: Coding) -> Vec<u8> {
+    match coding {
+        Coding::Method2 => encode_by::<Method2>(codes, count, qs),
+        Coding::Method3 => encode_by::<Method3>(codes, count, qs),
+    }
+}
+
+fn encode_by<B: Binarization>(codes: &[u32], count: usize, qs: &[Quantizer]) -> Vec<u8> {
     debug_assert_eq!(codes.len(), count * qs.len());
     let plane = |k: usize| &codes[k * count..(k + 1) * count];
     let cost = |k: usize, mode: u8| {
         let mut m = Meter::default();
-        put_component(&mut m, mode, k, qs, &plane);
+        put_component::<B, _>(&mut m, mode, k, qs, &plane);
         m.0
     };
     let best: Vec<(f64, u8)> = (0..qs.len())
         .map(|k| {
-            let candidates: &[u8] = if k == 0 {
-                &[MODE_DIRECT, MODE_ALONG]
-            } else {
-                &[MODE_DIRECT, MODE_ACROSS, MODE_ALONG]
+            let candidates: &[u8] = match (k, B::RAW) {
+                (0, false) => &[MODE_DIRECT, MODE_ALONG],
+                (_, false) => &[MODE_DIRECT, MODE_ACROSS, MODE_ALONG],
+                (0, true) => &[MODE_DIRECT, MODE_ALONG, MODE_RAW],
+                (_, true) => &[MODE_DIRECT, MODE_ACROSS, MODE_ALONG, MODE_RAW],
             };
             candidates
                 .iter()
@@ -86,26 +147,50 @@ pub fn encode(codes: &[u32], count: usize, qs: &[Quantizer]) -> Vec<u8> {
     if qs.len() == 2 && cost(0, MODE_MORTON) < best[0].0 + best[1].0 {
         modes = vec![MODE_MORTON; 2];
     }
-    encode_with_modes(codes, count, qs, &modes)
+    encode_with_modes_by::<B>(codes, count, qs, &modes)
 }
 
-/// [`encode`] in the given modes (which must be valid for `qs`, as [`decode`] checks).
-pub fn encode_with_modes(codes: &[u32], count: usize, qs: &[Quantizer], modes: &[u8]) -> Vec<u8> {
+/// [`encode`] in the given modes (which must be valid for `qs` and `coding`, as
+/// [`check_modes`] says).
+pub fn encode_with_modes(
+    codes: &[u32],
+    count: usize,
+    qs: &[Quantizer],
+    modes: &[u8],
+    coding: Coding,
+) -> Vec<u8> {
+    match coding {
+        Coding::Method2 => encode_with_modes_by::<Method2>(codes, count, qs, modes),
+        Coding::Method3 => encode_with_modes_by::<Method3>(codes, count, qs, modes),
+    }
+}
+
+fn encode_with_modes_by<B: Binarization>(
+    codes: &[u32],
+    count: usize,
+    qs: &[Quantizer],
+    modes: &[u8],
+) -> Vec<u8> {
     let plane = |k: usize| &codes[k * count..(k + 1) * count];
     let mut e = Encoder::new();
     for (k, &mode) in modes.iter().enumerate() {
         if mode == MODE_MORTON && k == 1 {
             break;
         }
-        put_component(&mut e, mode, k, qs, &plane);
+        put_component::<B, _>(&mut e, mode, k, qs, &plane);
     }
     let mut out = modes.to_vec();
-    out.extend(e.finish());
+    let (stream, raw) = e.finish_with_raw();
+    if B::RAW {
+        out.extend((raw.len() as u32).to_be_bytes());
+    }
+    out.extend(stream);
+    out.extend(raw);
     out
 }
 
 /// Code component `k` (for [`MODE_MORTON`], components 0 and 1) into `s`.
-fn put_component<'c, S: Sink>(
+fn put_component<'c, B: Binarization, S: Sink>(
     s: &mut S,
     mode: u8,
     k: usize,
@@ -115,7 +200,7 @@ fn put_component<'c, S: Sink>(
     let q = &qs[k];
     match mode {
         MODE_MORTON => {
-            let mut ctx = Signed::default();
+            let mut ctx = Signed::<B::Step>::default();
             let mut prev = 0u64;
             for (&u, &v) in plane(0).iter().zip(plane(1)) {
                 let key = morton(u, v);
@@ -125,19 +210,25 @@ fn put_component<'c, S: Sink>(
         }
         _ if q.bits == 0 => {}
         MODE_DIRECT => {
-            let mut ctx = Tree::new(q.bits);
+            let mut ctx = B::tree(q.bits);
             for &c in plane(k) {
                 ctx.put(s, c);
             }
         }
+        MODE_RAW => {
+            for &c in plane(k) {
+                s.raw(u64::from(c), u32::from(q.bits));
+            }
+        }
         MODE_ACROSS => {
-            let mut ctx = Signed::default();
+            let mut ctx = Signed::<B::Residual>::default();
             for (&c, &p) in plane(k).iter().zip(plane(k - 1)) {
-                ctx.put(s, i64::from(c) - i64::from(across(&qs[k - 1], q, p)));
+                let r = i64::from(c) - i64::from(across(&qs[k - 1], q, p));
+                ctx.put(s, r);
             }
         }
         _ => {
-            let mut ctx = Signed::default();
+            let mut ctx = Signed::<B::Residual>::default();
             let mut prev = 0u32;
             for &c in plane(k) {
                 ctx.put(s, i64::from(c) - i64::from(prev));
@@ -154,14 +245,16 @@ fn out_of_range(what: &str, i: usize, k: usize) -> Error {
     )
 }
 
-/// Refuse modes that §5.4.3 does not allow: an unknown byte, [`MODE_ACROSS`] on the first
-/// component, [`MODE_MORTON`] other than on both components of a pair.
-pub fn check_modes(modes: &[u8]) -> Result<()> {
+/// Refuse modes that §5.4.3 and §5.4.4 do not allow in `coding`: an unknown byte,
+/// [`MODE_ACROSS`] on the first component, [`MODE_MORTON`] other than on both components
+/// of a pair, [`MODE_RAW`] in method 2.
+pub fn check_modes(modes: &[u8], coding: Coding) -> Result<()> {
     for (k, &m) in modes.iter().enumerate() {
         let ok = match m {
             MODE_DIRECT | MODE_ALONG => true,
             MODE_ACROSS => k > 0,
             MODE_MORTON => modes == [MODE_MORTON; 2],
+            MODE_RAW => coding == Coding::Method3,
             _ => false,
         };
         if !ok {
@@ -171,19 +264,48 @@ pub fn check_modes(modes: &[u8]) -> Result<()> {
     Ok(())
 }
 
-/// Decode a method-2 payload's data into `count` planar codes. `data` is the mode bytes
-/// and the coded stream; every byte of it must be used.
-pub fn decode(data: &[u8], count: usize, qs: &[Quantizer]) -> Result<Vec<u32>> {
+/// Decode a method-2 or method-3 payload's data into `count` planar codes. `data` is the
+/// mode bytes and the coded data (§5.4, §5.4.4); every byte of it must be used.
+pub fn decode(data: &[u8], count: usize, qs: &[Quantizer], coding: Coding) -> Result<Vec<u32>> {
+    match coding {
+        Coding::Method2 => decode_by::<Method2>(data, count, qs),
+        Coding::Method3 => decode_by::<Method3>(data, count, qs),
+    }
+}
+
+fn decode_by<B: Binarization>(data: &[u8], count: usize, qs: &[Quantizer]) -> Result<Vec<u32>> {
     let k_all = qs.len();
-    if data.len() < k_all {
+    let coding = if B::RAW {
+        Coding::Method3
+    } else {
+        Coding::Method2
+    };
+    let head = k_all + if B::RAW { 4 } else { 0 };
+    if data.len() < head {
         return Err(Error::new(
             ErrorKind::Decompression,
             "coded data shorter than its mode bytes",
         ));
     }
-    let (modes, stream) = data.split_at(k_all);
-    check_modes(modes)?;
-    let mut d = Decoder::new(stream)?;
+    let (modes, rest) = data.split_at(k_all);
+    check_modes(modes, coding)?;
+    let (stream, raw) = if B::RAW {
+        let (len, rest) = rest.split_at(4);
+        let len = u32::from_be_bytes(len.try_into().expect("4 bytes")) as usize;
+        if len > rest.len() {
+            return Err(Error::new(
+                ErrorKind::Decompression,
+                format!(
+                    "{len} bytes of raw bits in {} bytes of coded data",
+                    rest.len()
+                ),
+            ));
+        }
+        rest.split_at(rest.len() - len)
+    } else {
+        (rest, &[][..])
+    };
+    let mut d = Decoder::with_raw(stream, raw)?;
     let mut codes = vec![0u32; count * k_all];
     let mut k = 0;
     while k < k_all {
@@ -194,7 +316,7 @@ pub fn decode(data: &[u8], count: usize, qs: &[Quantizer]) -> Result<Vec<u32>> {
             MODE_MORTON => {
                 let (u_bits, v_bits) = (qs[0].bits, qs[1].bits);
                 let width = 2 * usize::from(u_bits.max(v_bits));
-                let mut ctx = Signed::default();
+                let mut ctx = Signed::<B::Step>::default();
                 let mut prev = 0i64;
                 let (us, vs) = rest.split_at_mut(count);
                 for i in 0..count {
@@ -216,13 +338,19 @@ pub fn decode(data: &[u8], count: usize, qs: &[Quantizer]) -> Result<Vec<u32>> {
             _ if q.bits == 0 => {}
             MODE_DIRECT => {
                 // A tree of `bits` levels yields codes up to `max` and no further.
-                let mut ctx = Tree::new(q.bits);
+                let mut ctx = B::tree(q.bits);
                 for c in rest[..count].iter_mut() {
                     *c = ctx.get(&mut d)?;
                 }
             }
+            MODE_RAW => {
+                // `bits` raw bits are a code up to `max` and no further.
+                for c in rest[..count].iter_mut() {
+                    *c = d.raw_code(q.bits)?;
+                }
+            }
             mode => {
-                let mut ctx = Signed::default();
+                let mut ctx = Signed::<B::Residual>::default();
                 let prior = &done[(k.max(1) - 1) * count..];
                 // The prediction across components depends on the prior code alone: a
                 // table of it where there are fewer codes than Gaussians.
@@ -274,82 +402,154 @@ mod tests {
         }
     }
 
+    /// A payload in `modes`, whichever the encoder would have chosen.
+    fn forced(codes: &[u32], n: usize, qs: &[Quantizer], modes: &[u8], c: Coding) -> Vec<u8> {
+        encode_with_modes(codes, n, qs, modes, c)
+    }
+
     #[test]
     fn every_mode_roundtrips() {
-        let mut rng = test_rng(11);
-        for &(n, bits) in &[
-            (0usize, 8u8),
-            (1, 8),
-            (7, 3),
-            (500, 8),
-            (500, 13),
-            (300, 24),
-        ] {
-            let qs = [q(bits, 0.0, 1.0), q(bits, -0.5, 0.5), q(0, 0.2, 0.2)];
-            let max = qs[0].max_code() as f32;
-            let mut codes = Vec::new();
-            for k in 0..3 {
-                let mut walk = 0.5f32;
-                for _ in 0..n {
-                    walk = (walk + 0.05 * (rng() - 0.5)).clamp(0.0, 1.0);
-                    codes.push(if k == 2 { 0 } else { (walk * max) as u32 });
+        for c in [Coding::Method2, Coding::Method3] {
+            let mut rng = test_rng(11);
+            for &(n, bits) in &[
+                (0usize, 8u8),
+                (1, 8),
+                (7, 3),
+                (500, 8),
+                (500, 13),
+                (300, 24),
+            ] {
+                let qs = [q(bits, 0.0, 1.0), q(bits, -0.5, 0.5), q(0, 0.2, 0.2)];
+                let max = qs[0].max_code() as f32;
+                let mut codes = Vec::new();
+                for k in 0..3 {
+                    let mut walk = 0.5f32;
+                    for _ in 0..n {
+                        walk = (walk + 0.05 * (rng() - 0.5)).clamp(0.0, 1.0);
+                        codes.push(if k == 2 { 0 } else { (walk * max) as u32 });
+                    }
                 }
-            }
-            let data = encode(&codes, n, &qs);
-            assert_eq!(decode(&data, n, &qs).unwrap(), codes, "n {n} bits {bits}");
-            // Forced modes, each of which the encoder may not have chosen.
-            for modes in [[0u8, 1, 0], [2, 2, 2], [0, 2, 1]] {
-                let mut e = Encoder::new();
-                let plane = |k: usize| &codes[k * n..(k + 1) * n];
-                for (k, &m) in modes.iter().enumerate() {
-                    put_component(&mut e, m, k, &qs, &plane);
+                let data = encode(&codes, n, &qs, c);
+                assert_eq!(
+                    decode(&data, n, &qs, c).unwrap(),
+                    codes,
+                    "n {n} bits {bits}"
+                );
+                // Forced modes, each of which the encoder may not have chosen.
+                let mut all: Vec<[u8; 3]> = vec![[0, 1, 0], [2, 2, 2], [0, 2, 1]];
+                if c == Coding::Method3 {
+                    all.extend([[4, 4, 4], [4, 1, 0], [2, 4, 1]]);
                 }
-                let mut data = modes.to_vec();
-                data.extend(e.finish());
-                assert_eq!(decode(&data, n, &qs).unwrap(), codes);
+                for modes in all {
+                    let data = forced(&codes, n, &qs, &modes, c);
+                    assert_eq!(decode(&data, n, &qs, c).unwrap(), codes, "{c:?} {modes:?}");
+                }
+                let pair = [qs[0], q(bits.saturating_sub(2), 0.0, 1.0)];
+                let codes2: Vec<u32> = codes[..2 * n]
+                    .iter()
+                    .enumerate()
+                    .map(|(i, &c)| if i >= n { c >> 2 } else { c })
+                    .collect();
+                let data = forced(&codes2, n, &pair, &[MODE_MORTON; 2], c);
+                assert_eq!(decode(&data, n, &pair, c).unwrap(), codes2);
             }
-            let pair = [qs[0], q(bits.saturating_sub(2), 0.0, 1.0)];
-            let codes2: Vec<u32> = codes[..2 * n]
-                .iter()
-                .enumerate()
-                .map(|(i, &c)| if i >= n { c >> 2 } else { c })
-                .collect();
-            let mut e = Encoder::new();
-            put_component(&mut e, MODE_MORTON, 0, &pair, &|k| {
-                &codes2[k * n..(k + 1) * n]
-            });
-            let mut data = vec![MODE_MORTON; 2];
-            data.extend(e.finish());
-            assert_eq!(decode(&data, n, &pair).unwrap(), codes2);
         }
     }
 
     #[test]
+    fn method_3_keeps_the_codes_of_method_2_in_about_as_many_bytes() {
+        // Codes with structure in their top bits and noise below, as a fitted file's are.
+        let mut rng = test_rng(5);
+        let n = 4000;
+        let qs = [q(12, 0.0, 1.0), q(12, 0.0, 1.0)];
+        let mut codes: Vec<u32> = (0..2 * n).map(|_| (rng() * 4095.0) as u32).collect();
+        codes[..n].sort_unstable();
+        let two = encode(&codes, n, &qs, Coding::Method2);
+        let three = encode(&codes, n, &qs, Coding::Method3);
+        assert_eq!(decode(&three, n, &qs, Coding::Method3).unwrap(), codes);
+        assert!(
+            (three.len() as f64) < two.len() as f64 * 1.01,
+            "method 3 {} bytes, method 2 {}",
+            three.len(),
+            two.len()
+        );
+    }
+
+    #[test]
     fn bad_modes_and_ranges_are_refused() {
-        let qs = [q(4, 0.0, 1.0), q(4, 0.0, 1.0)];
-        let codes = vec![1, 2, 3, 4];
-        let good = encode(&codes, 2, &qs);
-        for modes in [[1u8, 0], [3, 0], [0, 3], [4, 0]] {
-            let mut bad = good.clone();
-            bad[..2].copy_from_slice(&modes);
-            assert_eq!(
-                decode(&bad, 2, &qs).unwrap_err().kind(),
-                ErrorKind::InvalidValue,
-                "{modes:?}"
-            );
+        for c in [Coding::Method2, Coding::Method3] {
+            let qs = [q(4, 0.0, 1.0), q(4, 0.0, 1.0)];
+            let codes = vec![1, 2, 3, 4];
+            let good = encode(&codes, 2, &qs, c);
+            let mut bad_modes = vec![[1u8, 0], [3, 0], [0, 3], [5, 0]];
+            if c == Coding::Method2 {
+                bad_modes.push([4, 0]);
+            }
+            for modes in bad_modes {
+                let mut bad = good.clone();
+                bad[..2].copy_from_slice(&modes);
+                assert_eq!(
+                    decode(&bad, 2, &qs, c).unwrap_err().kind(),
+                    ErrorKind::InvalidValue,
+                    "{c:?} {modes:?}"
+                );
+            }
+            // A residual of 20 on a 4-bit code.
+            let data = forced(&[20], 1, &[q(5, 0.0, 1.0)], &[MODE_ALONG], c);
+            assert!(decode(&data, 1, &qs[..1], c).is_err());
+            // Truncated and over-long payloads.
+            assert!(decode(&good[..good.len() - 1], 2, &qs, c).is_err());
+            let mut long = good.clone();
+            long.push(7);
+            assert!(decode(&long, 2, &qs, c).is_err());
+            assert!(decode(&good, 3, &qs, c).is_err());
         }
-        // A residual of 20 on a 4-bit code.
-        let mut e = Encoder::new();
-        let mut s = Signed::default();
-        s.put(&mut e, 20);
-        let mut data = vec![MODE_ALONG, MODE_ALONG];
-        data.extend(e.finish());
-        assert!(decode(&data, 1, &qs[..1]).is_err());
-        // Truncated and over-long streams.
-        assert!(decode(&good[..good.len() - 1], 2, &qs).is_err());
-        let mut long = good.clone();
-        long.push(7);
-        assert!(decode(&long, 2, &qs).is_err());
-        assert!(decode(&good, 3, &qs).is_err());
+    }
+
+    #[test]
+    fn method_3_raw_bits_are_checked() {
+        let c = Coding::Method3;
+        let qs = [q(7, 0.0, 1.0)];
+        // Raw codes of 7 bits: 3 codes, 21 bits, in 3 bytes with 3 bits of padding.
+        let data = forced(&[100, 5, 127], 3, &qs, &[MODE_RAW], c);
+        let raw_len = |d: &[u8]| u32::from_be_bytes(d[1..5].try_into().unwrap());
+        assert_eq!(raw_len(&data), 3);
+        assert_eq!(decode(&data, 3, &qs, c).unwrap(), [100, 5, 127]);
+        let err = |d: &[u8], n: usize| decode(d, n, &qs, c).unwrap_err().to_string();
+        // More codes than the raw bits hold.
+        assert!(err(&data, 4).contains("raw bits end"), "{}", err(&data, 4));
+        // A raw byte too many, and padding that is not zeros.
+        let mut long = data.clone();
+        long.push(0);
+        long[1..5].copy_from_slice(&4u32.to_be_bytes());
+        assert!(
+            err(&long, 3).contains("raw bytes left"),
+            "{}",
+            err(&long, 3)
+        );
+        let mut ones = data.clone();
+        *ones.last_mut().unwrap() |= 1;
+        assert!(
+            err(&ones, 3).contains("padded with ones"),
+            "{}",
+            err(&ones, 3)
+        );
+        // A raw length past the payload, and a payload too short for its length field.
+        let mut past = data.clone();
+        past[1..5].copy_from_slice(&u32::MAX.to_be_bytes());
+        assert!(
+            err(&past, 3).contains("bytes of raw bits"),
+            "{}",
+            err(&past, 3)
+        );
+        assert!(decode(&data[..3], 3, &qs, c).is_err());
+        // Mantissa bits raw: a magnitude whose raw bits are cut.
+        let big = forced(&[0, 120], 2, &qs, &[MODE_ALONG], c);
+        assert_eq!(decode(&big, 2, &qs, c).unwrap(), [0, 120]);
+        let n = raw_len(&big) as usize;
+        assert!(n > 0);
+        let mut cut = big[..big.len() - n].to_vec();
+        cut[1..5].copy_from_slice(&0u32.to_be_bytes());
+        assert!(decode(&cut, 2, &qs, c).is_err());
     }
 }

@@ -10,11 +10,10 @@
 use super::chunk::{framed_len, write_chunk, ChunkType, RawChunk, SIGNATURE};
 use super::enhancer::{EnhancerRecord, OriginalColors};
 use super::error::{invalid, Error, ErrorKind, Result};
-use super::header::VERSION_MINOR_CODED;
 use super::limits::Limits;
 use super::meta::{CompressionMeta, MAX_SETTINGS_LEN};
 use super::reader::{read_file, GsiFile};
-use super::records::Attribute;
+use super::records::{coded_method, Attribute};
 use crate::model::ToneCurve;
 
 /// A validated file together with the payload of each of its chunks, in stream order.
@@ -147,11 +146,13 @@ impl ChunkedFile {
                     }
                     out.push(c.clone());
                 }
-                // A 1.0 file stays readable by 1.0 decoders; a 1.1 file may use method 2.
+                // `GHDR` is kept byte for byte (§7.4), so the colours take only a method
+                // its minor allows: a 1.0 file stays readable by 1.0 decoders, a 1.1 file
+                // may use method 2, a 1.6 file method 3.
                 ChunkType::COLORS => out.push(RawChunk {
                     ty: c.ty,
                     data: colors
-                        .to_payload_with(zstd_level, header.version_minor >= VERSION_MINOR_CODED)?,
+                        .to_payload_coded(zstd_level, coded_method(header.version_minor))?,
                 }),
                 _ => out.push(c.clone()),
             }

@@ -7,11 +7,13 @@ use byteorder::{BigEndian, ByteOrder};
 
 /// Major version this decoder implements; a file with another major is refused.
 pub const VERSION_MAJOR: u8 = 1;
-/// Minor version of a file that no payload of method 2 needs; minors add only what a
+/// Minor version of a file that no coded payload (method 2 or 3) needs; minors add only what a
 /// lower one may ignore, or refuses by name (§2.5).
 pub const VERSION_MINOR: u8 = 0;
 /// Minor version of a file with a payload of compression method 2 (§5.4).
 pub const VERSION_MINOR_CODED: u8 = 1;
+/// Minor version of a file with a payload of compression method 3 (§5.4.4).
+pub const VERSION_MINOR_CODED_RAW: u8 = 6;
 /// Exact payload length of `GHDR`.
 pub const HEADER_LEN: usize = 18;
 

@@ -30,12 +30,13 @@ pub use enhancer::{
 pub use error::{Error, ErrorKind, Result};
 pub use header::{
     ColorSpace, Header, FLAG_IMPORTANCE_ORDERED, VERSION_MAJOR, VERSION_MINOR, VERSION_MINOR_CODED,
+    VERSION_MINOR_CODED_RAW,
 };
 pub use limits::{Limits, DEFAULT_RENDER_WORK};
 pub use meta::CompressionMeta;
 pub use quant::{Quantizer, MAX_BITS};
 pub use reader::{read_file, Decoder, GsiFile};
-pub use records::{Attribute, BitDepths, Records};
+pub use records::{coded_method, Attribute, BitDepths, Records, METHOD_CODED, METHOD_CODED_RAW};
 pub use settings::EncoderSettings;
 pub use writer::{to_bytes, write_file, WriteOptions};
 

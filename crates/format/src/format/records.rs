@@ -1,9 +1,9 @@
 //! Records: the attributes exactly as stored (integer codes plus quantizers), and their
 //! lossless link to the float [`Scene`](crate::model::Scene).
 
-use super::context;
+use super::context::{self, Coding};
 use super::error::{invalid, Error, ErrorKind, Result};
-use super::header::Header;
+use super::header::{Header, VERSION_MINOR_CODED, VERSION_MINOR_CODED_RAW};
 use super::limits::{AllocBudget, Limits};
 use super::quant::{self, Quantizer};
 use crate::model::{CovParam, GaussianSet, Scene, WeightRule};
@@ -14,6 +14,30 @@ pub const METHOD_STORED: u8 = 0;
 pub const METHOD_ZSTD: u8 = 1;
 /// Predicted, context-modelled and range-coded (spec §5.4; version 1.1).
 pub const METHOD_CODED: u8 = 2;
+/// Method 2's predictions with the bits that contexts do not help with raw, decoded with
+/// fewer decisions (spec §5.4.4; version 1.6). What the encoder writes.
+pub const METHOD_CODED_RAW: u8 = 3;
+
+/// The coded method that a file of minor version `minor` may hold (§2.5): 3 from 1.6,
+/// 2 from 1.1, none before.
+pub fn coded_method(minor: u8) -> Option<u8> {
+    if minor >= VERSION_MINOR_CODED_RAW {
+        Some(METHOD_CODED_RAW)
+    } else if minor >= VERSION_MINOR_CODED {
+        Some(METHOD_CODED)
+    } else {
+        None
+    }
+}
+
+/// The coding of a coded method byte.
+fn coding(method: u8) -> Option<Coding> {
+    match method {
+        METHOD_CODED => Some(Coding::Method2),
+        METHOD_CODED_RAW => Some(Coding::Method3),
+        _ => None,
+    }
+}
 
 /// Bytes in front of the packed data for an attribute of `components` components.
 pub const fn attribute_preamble_len(components: usize) -> usize {
@@ -84,21 +108,30 @@ impl Attribute {
         self.to_payload_with(zstd_level, false)
     }
 
-    /// A method-2 payload in the given modes, for the spec's worked example and tests;
-    /// `None` where the modes are not valid for this attribute.
+    /// A payload of `method` (2 or 3) in the given modes, for the spec's worked examples
+    /// and tests; `None` where the method is not a coded one or the modes are not valid
+    /// for this attribute.
     #[doc(hidden)]
-    pub fn to_coded_payload(&self, modes: &[u8]) -> Option<Vec<u8>> {
-        let ok = modes.len() == self.components() && context::check_modes(modes).is_ok();
+    pub fn to_coded_payload(&self, modes: &[u8], method: u8) -> Option<Vec<u8>> {
+        let c = coding(method)?;
+        let ok = modes.len() == self.components() && context::check_modes(modes, c).is_ok();
         ok.then(|| {
             let data =
-                context::encode_with_modes(&self.codes, self.count(), &self.quantizers, modes);
-            self.payload(METHOD_CODED, &data)
+                context::encode_with_modes(&self.codes, self.count(), &self.quantizers, modes, c);
+            self.payload(method, &data)
         })
     }
 
-    /// [`to_payload`](Self::to_payload), and with `coded` also method 2 (§5.4), of the
+    /// [`to_payload`](Self::to_payload), and with `coded` also method 3 (§5.4.4), of the
     /// three whichever is smallest.
     pub fn to_payload_with(&self, zstd_level: i32, coded: bool) -> Result<Vec<u8>> {
+        self.to_payload_coded(zstd_level, coded.then_some(METHOD_CODED_RAW))
+    }
+
+    /// [`to_payload`](Self::to_payload), and with `coded` also that method (2 or 3), of
+    /// the three whichever is smallest: for a file whose minor version says which
+    /// methods it may hold (§2.5).
+    pub fn to_payload_coded(&self, zstd_level: i32, coded: Option<u8>) -> Result<Vec<u8>> {
         let packed = quant::pack(&self.codes, self.count(), &self.quantizers);
         let zipped = zstd::bulk::compress(&packed, zstd_level)?;
         let (mut method, mut data) = if zipped.len() < packed.len() {
@@ -106,10 +139,10 @@ impl Attribute {
         } else {
             (METHOD_STORED, packed)
         };
-        if coded {
-            let c = context::encode(&self.codes, self.count(), &self.quantizers);
+        if let Some((m, c)) = coded.and_then(|m| Some((m, coding(m)?))) {
+            let c = context::encode(&self.codes, self.count(), &self.quantizers, c);
             if c.len() < data.len() {
-                (method, data) = (METHOD_CODED, c);
+                (method, data) = (m, c);
             }
         }
         Ok(self.payload(method, &data))
@@ -132,7 +165,7 @@ impl Attribute {
     }
 
     /// Parse one attribute payload of `count` records (default [`Limits`]): the entry of
-    /// the spec's worked examples and of the fuzz target of method 2.
+    /// the spec's worked examples and of the fuzz target of methods 2 and 3.
     #[doc(hidden)]
     pub fn from_payload(payload: &[u8], components: usize, count: u32) -> Result<Attribute> {
         Self::parse_standalone(payload, components, count, &Limits::default())
@@ -224,13 +257,13 @@ impl Attribute {
                 }
                 &zipped
             }
-            METHOD_CODED => &[],
+            METHOD_CODED | METHOD_CODED_RAW => &[],
             m => return Err(invalid(format!("compression method {m}"))),
         };
         let ncodes = u64::from(count) * components as u64;
         budget.reserve(ncodes * 4, "attribute codes")?;
-        let codes = if method == METHOD_CODED {
-            context::decode(data, count as usize, &quantizers)?
+        let codes = if let Some(c) = coding(method) {
+            context::decode(data, count as usize, &quantizers, c)?
         } else {
             quant::unpack(packed, count as usize, &quantizers)
         };

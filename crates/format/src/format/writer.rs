@@ -2,9 +2,9 @@
 
 use super::chunk::{framed_len, write_chunk, ChunkType, RawChunk, SIGNATURE};
 use super::error::{invalid, Result};
-use super::header::VERSION_MINOR_CODED;
+use super::header::{VERSION_MINOR_CODED, VERSION_MINOR_CODED_RAW};
 use super::meta::{CompressionMeta, MAX_SETTINGS_LEN};
-use super::records::{attribute_preamble_len, Records, METHOD_CODED};
+use super::records::{attribute_preamble_len, Records, METHOD_CODED, METHOD_CODED_RAW};
 use std::io::Write;
 
 /// What goes into a file besides the records.
@@ -18,10 +18,10 @@ pub struct WriteOptions {
     pub settings: Option<String>,
     /// Further ancillary chunks, written in order after the attributes.
     pub ancillary: Vec<RawChunk>,
-    /// Also consider compression method 2 (§5.4) for each attribute, keeping the smallest
-    /// payload; a file that uses it is written as version 1.1, which 1.0 decoders refuse.
-    /// Off by default, so that a plain write stays readable by every 1.0 decoder; the
-    /// encoder turns it on.
+    /// Also consider compression method 3 (§5.4.4) for each attribute, keeping the
+    /// smallest payload; a file that uses it is written as version 1.6, which earlier
+    /// decoders refuse ("compression method 3"). Off by default, so that a plain write
+    /// stays readable by every 1.0 decoder; the encoder turns it on.
     pub context_coding: bool,
 }
 
@@ -67,11 +67,16 @@ pub fn write_file<W: Write>(w: &mut W, records: &Records, opts: &WriteOptions) -
     if let Some(ty) = ChunkType::of_weight_rule(records.weights) {
         body.push((ty, Vec::new()));
     }
-    let mut coded = false;
+    // The least minor version that every payload's method needs (§2.5).
+    let mut minor = 0;
     for (ty, a) in attributes {
         if let Some(a) = a {
             let p = a.to_payload_with(opts.zstd_level, opts.context_coding)?;
-            coded |= p[attribute_preamble_len(a.components()) - 5] == METHOD_CODED;
+            minor = minor.max(match p[attribute_preamble_len(a.components()) - 5] {
+                METHOD_CODED => VERSION_MINOR_CODED,
+                METHOD_CODED_RAW => VERSION_MINOR_CODED_RAW,
+                _ => 0,
+            });
             body.push((ty, p));
         }
     }
@@ -80,11 +85,9 @@ pub fn write_file<W: Write>(w: &mut W, records: &Records, opts: &WriteOptions) -
     }
     body.extend(opts.ancillary.iter().map(|c| (c.ty, c.data.clone())));
 
-    // §2.5: a file that uses method 2 says so in its minor version.
+    // §2.5: a file that uses method 2 or 3 says so in its minor version.
     let mut header = records.header;
-    if coded {
-        header.version_minor = header.version_minor.max(VERSION_MINOR_CODED);
-    }
+    header.version_minor = header.version_minor.max(minor);
     let header = header.to_bytes();
     let mut total = SIGNATURE.len() as u64 + framed_len(header.len()) + framed_len(0);
     total += body.iter().map(|(_, d)| framed_len(d.len())).sum::<u64>();
