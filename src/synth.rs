@@ -1006,10 +1006,10 @@ mod corpus {
             })
         }));
         files.push((K::Decompression, "coded3-stream-bytes-left", {
-            // A byte moved from the raw bits to the end of the stream.
+            // A byte put between the stream and the raw bits, which stay as they were.
             edit(ChunkType::COVARIANCE, &|d| {
-                let n = raw_len(d);
-                set_raw_len(d, n - 1)
+                let at = d.len() - raw_len(d) as usize;
+                d.insert(at, 0);
             })
         }));
         files.push((K::InvalidValue, "coded3-mode-5", {
