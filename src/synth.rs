@@ -49,10 +49,7 @@ mod corpus {
     /// would have chosen it.
     fn coded(records: &Records, modes: [&[u8]; 4], method: u8) -> Vec<u8> {
         let mut header = records.header;
-        header.version_minor = match method {
-            format::METHOD_CODED => format::VERSION_MINOR_CODED,
-            _ => format::VERSION_MINOR_CODED_RAW,
-        };
+        header.version_minor = format::minor_for_method(method);
         let attributes = [
             (ChunkType::POSITIONS, Some(&records.positions), modes[0]),
             (ChunkType::COVARIANCE, Some(&records.covariance), modes[1]),

@@ -324,6 +324,62 @@ fn put_chunk(out: &mut Vec<u8>, ty: ChunkType, data: &[u8]) {
     out.extend_from_slice(&format::chunk_crc(ty, data).to_be_bytes());
 }
 
+/// §2.5, §7.4: a stage-2 rewrite keeps `GHDR` byte for byte, so its colours take only a
+/// coded method that the file's minor version allows: none before 1.1, method 2 in
+/// 1.1–1.5, method 3 from 1.6.
+#[test]
+fn a_stage_2_rewrite_codes_colours_only_in_a_method_its_minor_allows() {
+    let corpus = concat!(env!("CARGO_MANIFEST_DIR"), "/corpus/valid/");
+    // An enhancer record from a small enhanced file, put on a larger one (3,000
+    // Gaussians), with colours whose green and blue differ from red in the lowest bit
+    // only: coded `across`, they take far fewer bytes than the 1.0 codings do.
+    let enhanced = std::fs::read(format!("{corpus}enhanced-sum-160.gsi")).unwrap();
+    let enhanced = format::ChunkedFile::parse(&enhanced, Limits::default()).unwrap();
+    let record = enhanced.enhancer(&Limits::default()).unwrap().unwrap();
+    let bytes = std::fs::read(format!("{corpus}coded3-sum-lsr-3000-morton.gsi")).unwrap();
+    for (minor, methods) in [
+        (0u8, &[0u8, 1][..]),
+        (1, &[2]),
+        (5, &[2]),
+        (6, &[3]),
+        (7, &[3]),
+    ] {
+        let patched = rewrite(
+            &bytes,
+            ChunkType::HEADER,
+            |p| {
+                let mut p = p.to_vec();
+                p[1] = minor;
+                p
+            },
+            &[],
+        );
+        let file = format::ChunkedFile::parse(&patched, Limits::default()).unwrap();
+        let mut colors = file.file.records.colors.clone();
+        let n = colors.count();
+        let red = colors.codes[..n].to_vec();
+        for k in 1..3 {
+            colors.quantizers[k] = colors.quantizers[0];
+            for (i, &r) in red.iter().enumerate() {
+                colors.codes[k * n + i] = r ^ (i as u32 >> (k - 1) & 1);
+            }
+        }
+        let out = file.with_colors(&colors, &record, None, true, 19).unwrap();
+        let again = format::ChunkedFile::parse(&out, Limits::default()).unwrap();
+        assert_eq!(again.file.records.header.version_minor, minor);
+        assert_eq!(again.file.records.colors, colors);
+        let gcol = again
+            .chunks
+            .iter()
+            .find(|c| c.ty == ChunkType::COLORS)
+            .unwrap();
+        // §5.1: the method byte follows the count of components and their 9-byte
+        // quantizers.
+        let method = gcol.data[1 + 9 * 3];
+        assert!(methods.contains(&method), "minor {minor}: method {method}");
+    }
+}
+
 /// §5.1: with `packed_len` = 0 (no Gaussians, or every component 0 bits wide) there is
 /// nothing to compress. Stored, the data is empty; under zstd it is a stream that
 /// decompresses to nothing: an empty frame, or no frame at all (empty data). Both read

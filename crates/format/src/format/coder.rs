@@ -59,7 +59,7 @@ struct RawWriter {
 
 impl RawWriter {
     fn put(&mut self, v: u64, n: u32) {
-        debug_assert!(n <= 56 && (n == 56 || v >> n == 0));
+        debug_assert!(n <= 56 && v >> n == 0);
         self.acc = (self.acc << n) | v;
         self.pending += n;
         while self.pending >= 8 {
@@ -554,8 +554,8 @@ const EXPONENT_BITS: u8 = 6;
 #[derive(Clone)]
 pub struct SplitMagnitude<const TREE: bool> {
     unary: [Prob; MAX_MAGNITUDE_BITS],
-    /// `e`'s tree, used only with `TREE`.
-    exponent: Tree,
+    /// `e`'s tree: `Some` exactly with `TREE`.
+    exponent: Option<Tree>,
     top: [Prob; MAX_MAGNITUDE_BITS],
 }
 
@@ -563,7 +563,7 @@ impl<const TREE: bool> Default for SplitMagnitude<TREE> {
     fn default() -> Self {
         SplitMagnitude {
             unary: [Prob::default(); MAX_MAGNITUDE_BITS],
-            exponent: Tree::new(EXPONENT_BITS),
+            exponent: TREE.then(|| Tree::new(EXPONENT_BITS)),
             top: [Prob::default(); MAX_MAGNITUDE_BITS],
         }
     }
@@ -574,8 +574,8 @@ impl<const TREE: bool> MagnitudeCode for SplitMagnitude<TREE> {
         let v = m + 1;
         let e = 63 - v.leading_zeros() as usize;
         debug_assert!(e < MAX_MAGNITUDE_BITS);
-        if TREE {
-            self.exponent.put(s, e as u32);
+        if let (true, Some(tree)) = (TREE, &mut self.exponent) {
+            tree.put(s, e as u32);
         } else {
             for j in 0..e {
                 s.bit(&mut self.unary[j], true);
@@ -591,8 +591,8 @@ impl<const TREE: bool> MagnitudeCode for SplitMagnitude<TREE> {
     #[inline(always)]
     fn get(&mut self, d: &mut Decoder, max_bits: usize) -> Result<u64> {
         let max_bits = max_bits.min(MAX_MAGNITUDE_BITS);
-        let e = if TREE {
-            self.exponent.get(d)? as usize
+        let e = if let (true, Some(tree)) = (TREE, &mut self.exponent) {
+            tree.get(d)? as usize
         } else {
             let mut e = 0;
             while d.decide(&mut self.unary[e]) {

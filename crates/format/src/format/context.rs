@@ -47,8 +47,10 @@ trait Binarization {
     type Residual: MagnitudeCode;
     /// The magnitude of a step of mode 3.
     type Step: MagnitudeCode;
-    /// Method 3: the data starts with the length of its raw bits, and mode 4 is allowed.
-    const RAW: bool;
+    /// The method whose binarization this is.
+    const CODING: Coding;
+    /// Method 3: the data holds the length of its raw bits, and mode 4 is allowed.
+    const RAW: bool = matches!(Self::CODING, Coding::Method3);
     /// The tree of mode 0 for codes of `bits` bits.
     fn tree(bits: u8) -> Tree;
 }
@@ -59,7 +61,7 @@ struct Method2;
 impl Binarization for Method2 {
     type Residual = Magnitude;
     type Step = Magnitude;
-    const RAW: bool = false;
+    const CODING: Coding = Coding::Method2;
     fn tree(bits: u8) -> Tree {
         Tree::new(bits)
     }
@@ -71,7 +73,7 @@ struct Method3;
 impl Binarization for Method3 {
     type Residual = SplitMagnitude<false>;
     type Step = SplitMagnitude<true>;
-    const RAW: bool = true;
+    const CODING: Coding = Coding::Method3;
     fn tree(bits: u8) -> Tree {
         Tree::split(bits)
     }
@@ -275,20 +277,18 @@ pub fn decode(data: &[u8], count: usize, qs: &[Quantizer], coding: Coding) -> Re
 
 fn decode_by<B: Binarization>(data: &[u8], count: usize, qs: &[Quantizer]) -> Result<Vec<u32>> {
     let k_all = qs.len();
-    let coding = if B::RAW {
-        Coding::Method3
-    } else {
-        Coding::Method2
-    };
     let head = k_all + if B::RAW { 4 } else { 0 };
     if data.len() < head {
         return Err(Error::new(
             ErrorKind::Decompression,
-            "coded data shorter than its mode bytes",
+            format!(
+                "{} bytes of coded data, fewer than the {head} in front of its stream",
+                data.len()
+            ),
         ));
     }
     let (modes, rest) = data.split_at(k_all);
-    check_modes(modes, coding)?;
+    check_modes(modes, B::CODING)?;
     let (stream, raw) = if B::RAW {
         let (len, rest) = rest.split_at(4);
         let len = u32::from_be_bytes(len.try_into().expect("4 bytes")) as usize;
@@ -550,6 +550,6 @@ mod tests {
         assert!(n > 0);
         let mut cut = big[..big.len() - n].to_vec();
         cut[1..5].copy_from_slice(&0u32.to_be_bytes());
-        assert!(decode(&cut, 2, &qs, c).is_err());
+        assert!(err(&cut, 2).contains("raw bits end"), "{}", err(&cut, 2));
     }
 }

@@ -13,7 +13,7 @@ use super::error::{invalid, Error, ErrorKind, Result};
 use super::limits::Limits;
 use super::meta::{CompressionMeta, MAX_SETTINGS_LEN};
 use super::reader::{read_file, GsiFile};
-use super::records::{coded_method, Attribute};
+use super::records::{newest_coding, Attribute};
 use crate::model::ToneCurve;
 
 /// A validated file together with the payload of each of its chunks, in stream order.
@@ -152,7 +152,7 @@ impl ChunkedFile {
                 ChunkType::COLORS => out.push(RawChunk {
                     ty: c.ty,
                     data: colors
-                        .to_payload_coded(zstd_level, coded_method(header.version_minor))?,
+                        .to_payload_coded(zstd_level, newest_coding(header.version_minor))?,
                 }),
                 _ => out.push(c.clone()),
             }

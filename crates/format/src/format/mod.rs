@@ -36,7 +36,9 @@ pub use limits::{Limits, DEFAULT_RENDER_WORK};
 pub use meta::CompressionMeta;
 pub use quant::{Quantizer, MAX_BITS};
 pub use reader::{read_file, Decoder, GsiFile};
-pub use records::{coded_method, Attribute, BitDepths, Records, METHOD_CODED, METHOD_CODED_RAW};
+pub use records::{
+    minor_for_method, Attribute, BitDepths, Records, METHOD_CODED, METHOD_CODED_RAW,
+};
 pub use settings::EncoderSettings;
 pub use writer::{to_bytes, write_file, WriteOptions};
 

@@ -18,15 +18,24 @@ pub const METHOD_CODED: u8 = 2;
 /// fewer decisions (spec §5.4.4; version 1.6). What the encoder writes.
 pub const METHOD_CODED_RAW: u8 = 3;
 
-/// The coded method that a file of minor version `minor` may hold (§2.5): 3 from 1.6,
-/// 2 from 1.1, none before.
-pub fn coded_method(minor: u8) -> Option<u8> {
+/// The newest coded method that a file of minor version `minor` may hold (§2.5): method
+/// 3 from 1.6, 2 from 1.1, none before. (A file of 1.6 may hold method 2 too.)
+pub fn newest_coding(minor: u8) -> Option<Coding> {
     if minor >= VERSION_MINOR_CODED_RAW {
-        Some(METHOD_CODED_RAW)
+        Some(Coding::Method3)
     } else if minor >= VERSION_MINOR_CODED {
-        Some(METHOD_CODED)
+        Some(Coding::Method2)
     } else {
         None
+    }
+}
+
+/// The least minor version of a file with a payload of `method` (§2.5).
+pub fn minor_for_method(method: u8) -> u8 {
+    match method {
+        METHOD_CODED => VERSION_MINOR_CODED,
+        METHOD_CODED_RAW => VERSION_MINOR_CODED_RAW,
+        _ => 0,
     }
 }
 
@@ -36,6 +45,14 @@ fn coding(method: u8) -> Option<Coding> {
         METHOD_CODED => Some(Coding::Method2),
         METHOD_CODED_RAW => Some(Coding::Method3),
         _ => None,
+    }
+}
+
+/// The method byte of a coding.
+fn method_of(coding: Coding) -> u8 {
+    match coding {
+        Coding::Method2 => METHOD_CODED,
+        Coding::Method3 => METHOD_CODED_RAW,
     }
 }
 
@@ -125,13 +142,13 @@ impl Attribute {
     /// [`to_payload`](Self::to_payload), and with `coded` also method 3 (§5.4.4), of the
     /// three whichever is smallest.
     pub fn to_payload_with(&self, zstd_level: i32, coded: bool) -> Result<Vec<u8>> {
-        self.to_payload_coded(zstd_level, coded.then_some(METHOD_CODED_RAW))
+        self.to_payload_coded(zstd_level, coded.then_some(Coding::Method3))
     }
 
-    /// [`to_payload`](Self::to_payload), and with `coded` also that method (2 or 3), of
-    /// the three whichever is smallest: for a file whose minor version says which
-    /// methods it may hold (§2.5).
-    pub fn to_payload_coded(&self, zstd_level: i32, coded: Option<u8>) -> Result<Vec<u8>> {
+    /// [`to_payload`](Self::to_payload), and with `coded` also that coded method, of the
+    /// three whichever is smallest: for a file whose minor version says which methods it
+    /// may hold ([`newest_coding`]).
+    pub fn to_payload_coded(&self, zstd_level: i32, coded: Option<Coding>) -> Result<Vec<u8>> {
         let packed = quant::pack(&self.codes, self.count(), &self.quantizers);
         let zipped = zstd::bulk::compress(&packed, zstd_level)?;
         let (mut method, mut data) = if zipped.len() < packed.len() {
@@ -139,10 +156,10 @@ impl Attribute {
         } else {
             (METHOD_STORED, packed)
         };
-        if let Some((m, c)) = coded.and_then(|m| Some((m, coding(m)?))) {
-            let c = context::encode(&self.codes, self.count(), &self.quantizers, c);
-            if c.len() < data.len() {
-                (method, data) = (m, c);
+        if let Some(c) = coded {
+            let d = context::encode(&self.codes, self.count(), &self.quantizers, c);
+            if d.len() < data.len() {
+                (method, data) = (method_of(c), d);
             }
         }
         Ok(self.payload(method, &data))

@@ -2,9 +2,8 @@
 
 use super::chunk::{framed_len, write_chunk, ChunkType, RawChunk, SIGNATURE};
 use super::error::{invalid, Result};
-use super::header::{VERSION_MINOR_CODED, VERSION_MINOR_CODED_RAW};
 use super::meta::{CompressionMeta, MAX_SETTINGS_LEN};
-use super::records::{attribute_preamble_len, Records, METHOD_CODED, METHOD_CODED_RAW};
+use super::records::{attribute_preamble_len, minor_for_method, Records};
 use std::io::Write;
 
 /// What goes into a file besides the records.
@@ -21,7 +20,9 @@ pub struct WriteOptions {
     /// Also consider compression method 3 (§5.4.4) for each attribute, keeping the
     /// smallest payload; a file that uses it is written as version 1.6, which earlier
     /// decoders refuse ("compression method 3"). Off by default, so that a plain write
-    /// stays readable by every 1.0 decoder; the encoder turns it on.
+    /// stays readable by every 1.0 decoder; the encoder turns it on. (Method 2, for
+    /// decoders of 1.1–1.5, is written only where a file already of such a minor is
+    /// rewritten for stage 2, which keeps its `GHDR`.)
     pub context_coding: bool,
 }
 
@@ -72,11 +73,9 @@ pub fn write_file<W: Write>(w: &mut W, records: &Records, opts: &WriteOptions) -
     for (ty, a) in attributes {
         if let Some(a) = a {
             let p = a.to_payload_with(opts.zstd_level, opts.context_coding)?;
-            minor = minor.max(match p[attribute_preamble_len(a.components()) - 5] {
-                METHOD_CODED => VERSION_MINOR_CODED,
-                METHOD_CODED_RAW => VERSION_MINOR_CODED_RAW,
-                _ => 0,
-            });
+            minor = minor.max(minor_for_method(
+                p[attribute_preamble_len(a.components()) - 5],
+            ));
             body.push((ty, p));
         }
     }
