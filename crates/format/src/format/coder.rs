@@ -360,15 +360,44 @@ impl Default for Magnitude {
     }
 }
 
+/// `e` in unary, a context per position: the prefix of §5.4.2's magnitude(L), which
+/// method 3 keeps for residuals.
+fn put_unary<S: Sink>(unary: &mut [Prob; MAX_MAGNITUDE_BITS], s: &mut S, e: usize) {
+    for p in &mut unary[..e] {
+        s.bit(p, true);
+    }
+    s.bit(&mut unary[e], false);
+}
+
+/// The unary prefix `e` of [`put_unary`], refused as soon as it reaches `max_bits`
+/// (≤ [`MAX_MAGNITUDE_BITS`]).
+#[inline(always)]
+fn get_unary(
+    unary: &mut [Prob; MAX_MAGNITUDE_BITS],
+    d: &mut Decoder,
+    max_bits: usize,
+) -> Result<usize> {
+    let mut e = 0;
+    while d.decide(&mut unary[e]) {
+        e += 1;
+        if e >= max_bits {
+            d.in_time()?;
+            return Err(too_wide(max_bits));
+        }
+    }
+    Ok(e)
+}
+
+fn too_wide(max_bits: usize) -> Error {
+    corrupt(format!("coded magnitude of more than {max_bits} bits"))
+}
+
 impl MagnitudeCode for Magnitude {
     fn put<S: Sink>(&mut self, s: &mut S, m: u64) {
         let v = m + 1;
         let e = 63 - v.leading_zeros() as usize;
         debug_assert!(e < MAX_MAGNITUDE_BITS);
-        for j in 0..e {
-            s.bit(&mut self.unary[j], true);
-        }
-        s.bit(&mut self.unary[e], false);
+        put_unary(&mut self.unary, s, e);
         for j in (0..e).rev() {
             s.bit(
                 &mut self.mantissa[e * MAX_MAGNITUDE_BITS + j],
@@ -377,20 +406,9 @@ impl MagnitudeCode for Magnitude {
         }
     }
 
-    /// (Refused as soon as the unary prefix passes `max_bits`.)
     #[inline(always)]
     fn get(&mut self, d: &mut Decoder, max_bits: usize) -> Result<u64> {
-        let max_bits = max_bits.min(MAX_MAGNITUDE_BITS);
-        let mut e = 0;
-        while d.decide(&mut self.unary[e]) {
-            e += 1;
-            if e >= max_bits {
-                d.in_time()?;
-                return Err(corrupt(format!(
-                    "coded magnitude of more than {max_bits} bits"
-                )));
-            }
-        }
+        let e = get_unary(&mut self.unary, d, max_bits.min(MAX_MAGNITUDE_BITS))?;
         let mut v = 1u64;
         for j in (0..e).rev() {
             let b = d.decide(&mut self.mantissa[e * MAX_MAGNITUDE_BITS + j]);
@@ -448,7 +466,8 @@ const TREE_NODES: usize = 2 << TREE_BITS;
 #[derive(Clone)]
 pub struct Tree {
     bits: u8,
-    /// Levels of the tree: `min(bits, TREE_BITS)`, or [`SPLIT_TREE_BITS`] for `split`.
+    /// Levels of the tree: `bits`, at most [`TREE_BITS`] (`new`) or [`SPLIT_TREE_BITS`]
+    /// (`split`).
     top: u8,
     /// The bits below the tree raw (method 3) rather than in `low`'s contexts.
     raw_low: bool,
@@ -488,12 +507,8 @@ impl Tree {
         }
     }
 
-    fn top(&self) -> u8 {
-        self.top
-    }
-
     pub fn put<S: Sink>(&mut self, s: &mut S, q: u32) {
-        let (top, rest) = (self.top(), self.bits - self.top());
+        let (top, rest) = (self.top, self.bits - self.top);
         let mut node = 1usize;
         for j in (0..top).rev() {
             let b = (q >> (rest + j)) & 1 == 1;
@@ -511,7 +526,7 @@ impl Tree {
 
     #[inline(always)]
     pub fn get(&mut self, d: &mut Decoder) -> Result<u32> {
-        let (top, rest) = (self.top(), self.bits - self.top());
+        let (top, rest) = (self.top, self.bits - self.top);
         let mut node = 1usize;
         let mut p = self.nodes[1];
         for _ in 0..top {
@@ -574,13 +589,9 @@ impl<const TREE: bool> MagnitudeCode for SplitMagnitude<TREE> {
         let v = m + 1;
         let e = 63 - v.leading_zeros() as usize;
         debug_assert!(e < MAX_MAGNITUDE_BITS);
-        if let (true, Some(tree)) = (TREE, &mut self.exponent) {
-            tree.put(s, e as u32);
-        } else {
-            for j in 0..e {
-                s.bit(&mut self.unary[j], true);
-            }
-            s.bit(&mut self.unary[e], false);
+        match (TREE, &mut self.exponent) {
+            (true, Some(tree)) => tree.put(s, e as u32),
+            _ => put_unary(&mut self.unary, s, e),
         }
         if e >= 1 {
             s.bit(&mut self.top[e], (v >> (e - 1)) & 1 == 1);
@@ -591,24 +602,16 @@ impl<const TREE: bool> MagnitudeCode for SplitMagnitude<TREE> {
     #[inline(always)]
     fn get(&mut self, d: &mut Decoder, max_bits: usize) -> Result<u64> {
         let max_bits = max_bits.min(MAX_MAGNITUDE_BITS);
-        let e = if let (true, Some(tree)) = (TREE, &mut self.exponent) {
-            tree.get(d)? as usize
-        } else {
-            let mut e = 0;
-            while d.decide(&mut self.unary[e]) {
-                e += 1;
+        let e = match (TREE, &mut self.exponent) {
+            (true, Some(tree)) => {
+                let e = tree.get(d)? as usize;
                 if e >= max_bits {
-                    break;
+                    return Err(too_wide(max_bits));
                 }
+                e
             }
-            e
+            _ => get_unary(&mut self.unary, d, max_bits)?,
         };
-        if e >= max_bits {
-            d.in_time()?;
-            return Err(corrupt(format!(
-                "coded magnitude of more than {max_bits} bits"
-            )));
-        }
         let mut v = 1u64;
         if e >= 1 {
             // (`e` < MAX_MAGNITUDE_BITS: the mask only tells the compiler.)

@@ -132,15 +132,10 @@ fn encode_by<B: Binarization>(codes: &[u32], count: usize, qs: &[Quantizer]) -> 
     };
     let best: Vec<(f64, u8)> = (0..qs.len())
         .map(|k| {
-            let candidates: &[u8] = match (k, B::RAW) {
-                (0, false) => &[MODE_DIRECT, MODE_ALONG],
-                (_, false) => &[MODE_DIRECT, MODE_ACROSS, MODE_ALONG],
-                (0, true) => &[MODE_DIRECT, MODE_ALONG, MODE_RAW],
-                (_, true) => &[MODE_DIRECT, MODE_ACROSS, MODE_ALONG, MODE_RAW],
-            };
-            candidates
-                .iter()
-                .map(|&m| (cost(k, m), m))
+            [MODE_DIRECT, MODE_ACROSS, MODE_ALONG, MODE_RAW]
+                .into_iter()
+                .filter(|&m| single_mode_allowed(m, k, B::CODING))
+                .map(|m| (cost(k, m), m))
                 .min_by(|a, b| a.0.total_cmp(&b.0))
                 .expect("candidates")
         })
@@ -225,8 +220,7 @@ fn put_component<'c, B: Binarization, S: Sink>(
         MODE_ACROSS => {
             let mut ctx = Signed::<B::Residual>::default();
             for (&c, &p) in plane(k).iter().zip(plane(k - 1)) {
-                let r = i64::from(c) - i64::from(across(&qs[k - 1], q, p));
-                ctx.put(s, r);
+                ctx.put(s, i64::from(c) - i64::from(across(&qs[k - 1], q, p)));
             }
         }
         _ => {
@@ -253,17 +247,25 @@ fn out_of_range(what: &str, i: usize, k: usize) -> Error {
 pub fn check_modes(modes: &[u8], coding: Coding) -> Result<()> {
     for (k, &m) in modes.iter().enumerate() {
         let ok = match m {
-            MODE_DIRECT | MODE_ALONG => true,
-            MODE_ACROSS => k > 0,
             MODE_MORTON => modes == [MODE_MORTON; 2],
-            MODE_RAW => coding == Coding::Method3,
-            _ => false,
+            _ => single_mode_allowed(m, k, coding),
         };
         if !ok {
             return Err(invalid(format!("coding mode {m} for component {k}")));
         }
     }
     Ok(())
+}
+
+/// Whether component `k` may be coded alone in `mode` under `coding` (every mode but
+/// [`MODE_MORTON`], which takes a pair).
+fn single_mode_allowed(mode: u8, k: usize, coding: Coding) -> bool {
+    match mode {
+        MODE_DIRECT | MODE_ALONG => true,
+        MODE_ACROSS => k > 0,
+        MODE_RAW => coding == Coding::Method3,
+        _ => false,
+    }
 }
 
 /// Decode a method-2 or method-3 payload's data into `count` planar codes. `data` is the

@@ -18,42 +18,36 @@ pub const METHOD_CODED: u8 = 2;
 /// fewer decisions (spec §5.4.4; version 1.6). What the encoder writes.
 pub const METHOD_CODED_RAW: u8 = 3;
 
-/// The newest coded method that a file of minor version `minor` may hold (§2.5): method
-/// 3 from 1.6, 2 from 1.1, none before. (A file of 1.6 may hold method 2 too.)
+/// The coded methods: each coding, its method byte, and the least minor version of a
+/// file that holds it (§2.5). Newest last.
+const CODED: [(Coding, u8, u8); 2] = [
+    (Coding::Method2, METHOD_CODED, VERSION_MINOR_CODED),
+    (Coding::Method3, METHOD_CODED_RAW, VERSION_MINOR_CODED_RAW),
+];
+
+/// The newest coded method that a file of minor version `minor` may hold: method 3 from
+/// 1.6, 2 from 1.1, none before. (A file of 1.6 may hold method 2 too.)
 pub fn newest_coding(minor: u8) -> Option<Coding> {
-    if minor >= VERSION_MINOR_CODED_RAW {
-        Some(Coding::Method3)
-    } else if minor >= VERSION_MINOR_CODED {
-        Some(Coding::Method2)
-    } else {
-        None
-    }
+    CODED.iter().rev().find(|c| minor >= c.2).map(|c| c.0)
 }
 
 /// The least minor version of a file with a payload of `method` (§2.5).
 pub fn minor_for_method(method: u8) -> u8 {
-    match method {
-        METHOD_CODED => VERSION_MINOR_CODED,
-        METHOD_CODED_RAW => VERSION_MINOR_CODED_RAW,
-        _ => 0,
-    }
+    CODED.iter().find(|c| c.1 == method).map_or(0, |c| c.2)
 }
 
 /// The coding of a coded method byte.
 fn coding(method: u8) -> Option<Coding> {
-    match method {
-        METHOD_CODED => Some(Coding::Method2),
-        METHOD_CODED_RAW => Some(Coding::Method3),
-        _ => None,
-    }
+    CODED.iter().find(|c| c.1 == method).map(|c| c.0)
 }
 
 /// The method byte of a coding.
 fn method_of(coding: Coding) -> u8 {
-    match coding {
-        Coding::Method2 => METHOD_CODED,
-        Coding::Method3 => METHOD_CODED_RAW,
-    }
+    CODED
+        .iter()
+        .find(|c| c.0 == coding)
+        .map(|c| c.1)
+        .expect("every coding is in the table")
 }
 
 /// Bytes in front of the packed data for an attribute of `components` components.
