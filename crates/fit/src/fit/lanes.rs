@@ -7,13 +7,16 @@
 //!
 //! On x86-64 the loops are compiled a second time, for AVX2 with fused multiply-adds
 //! ([`mla`]), picked at run time where the CPU has both (Intel since 2013, AMD since
-//! 2015); a kodim05 encode ran 1.35× faster than with unfused AVX2. A fused
-//! multiply-add is one correctly rounded operation, so the portable loops with `F` give
-//! its bits on any CPU (the test checks it), and a fit is the same on every CPU that
-//! runs the same build; between the fused and the unfused build, files differ by
-//! rounding (the PSNR by hundredths of a dB). An encoder promises no more: the decoder's
-//! loops, which define the pixels, stay unfused (spec §6), and the unfused build here
-//! gives the decoder's bits.
+//! 2015). The backward pass fuses its sums: a fused multiply-add is one correctly
+//! rounded operation, so the portable loops with `F` give its bits on any CPU (the test
+//! checks it), and a fit is the same on every CPU that runs the same build. The forward
+//! pass does not fuse: it does the decoder's operations in the decoder's order (spec §6),
+//! so the fit renders the pixels the per-pixel rule decodes, bit for bit, and LLVM
+//! vectorizes it whole, where with `mul_add` in the polynomial of `exp` it left most lanes
+//! scalar (kodim23 at 1 bpp, whole encode: 12.1 → 9.6 s of CPU with the chunk-rows below
+//! the cut-off skipped as well). Between the portable and the AVX2 build, files differ
+//! by the backward pass's rounding (the PSNR by hundredths of a dB). An encoder promises
+//! no more.
 
 use gsi_render::render::lanes::{mla, Footprint, LANES, V};
 use gsi_render::render::{Projected, Rect, TILE};
@@ -121,7 +124,7 @@ fn total(v: &V) -> f32 {
 
 /// With `KEEP`, the alphas are appended to `kept` as they are computed.
 #[inline(always)]
-fn forward_generic<const KEEP: bool, const F: bool>(
+fn forward_generic<const KEEP: bool>(
     list: &[u32],
     proj: &[Projected],
     rect: Rect,
@@ -134,9 +137,16 @@ fn forward_generic<const KEEP: bool, const F: bool>(
             continue;
         };
         for chunk in f.chunks() {
+            let column = f.column(chunk);
             for j in f.ys.clone() {
                 let dy = (j as f32 + 0.5) - g.mean[1];
-                let (alpha, _) = f.alphas::<F, false>(chunk * LANES, dy);
+                let Some(alpha) = f.column_alphas::<false>(&column, dy) else {
+                    // Every alpha is 0: adding nothing leaves the sums as they are.
+                    if KEEP {
+                        kept.extend_from_slice(&[0.0; LANES]);
+                    }
+                    continue;
+                };
                 if KEEP {
                     kept.extend_from_slice(&alpha);
                 }
@@ -144,7 +154,7 @@ fn forward_generic<const KEEP: bool, const F: bool>(
                 for (ch, plane) in acc.0.iter_mut().enumerate() {
                     let px = &mut plane[at..at + LANES];
                     for l in 0..LANES {
-                        px[l] = mla::<F>(g.color[ch], alpha[l], px[l]);
+                        px[l] = mla::<false>(g.color[ch], alpha[l], px[l]);
                     }
                 }
             }
@@ -178,15 +188,19 @@ fn backward_generic<const ALL: bool, const KEPT: bool, const F: bool>(
         let (mut c0, mut c1, mut c2) = (z, z, z);
         let (mut gx, mut gy, mut ga, mut gb, mut gc, mut go) = (z, z, z, z, z, z);
         for chunk in f.chunks() {
-            let dx_kept = f.dxs(chunk);
+            let column = f.column(chunk);
+            let dx = column.dx;
             for j in f.ys.clone() {
                 let dy = (j as f32 + 0.5) - g.mean[1];
-                let (alpha, dx) = if KEPT {
+                let alpha: V = if KEPT {
                     // The forward pass kept a chunk for every chunk and row walked here.
                     let a = kept.next().unwrap_or(&[0.0; LANES][..]);
-                    (std::array::from_fn(|l| a[l]), dx_kept)
+                    std::array::from_fn(|l| a[l])
                 } else {
-                    f.alphas::<F, false>(chunk * LANES, dy)
+                    match f.column_alphas::<false>(&column, dy) {
+                        Some(alpha) => alpha,
+                        None => continue,
+                    }
                 };
                 let at = (j - rect.y0) as usize * TILE_W + chunk * LANES;
                 let (r, gg, b) = (
@@ -236,7 +250,7 @@ pub(super) fn forward_tile(
         // SAFETY: the CPU has the features, checked just above.
         return unsafe { simd::forward(list, proj, rect, acc, kept) };
     }
-    forward_any::<false>(list, proj, rect, acc, kept)
+    forward_any(list, proj, rect, acc, kept)
 }
 
 /// The gradient of each Gaussian of `list` over tile `rect` (`out[i]` for `list[i]`),
@@ -261,7 +275,7 @@ pub(super) fn backward_tile(
 
 /// [`forward_generic`] with its switch picked at run time.
 #[inline(always)]
-fn forward_any<const F: bool>(
+fn forward_any(
     list: &[u32],
     proj: &[Projected],
     rect: Rect,
@@ -269,8 +283,8 @@ fn forward_any<const F: bool>(
     kept: Option<&mut Vec<f32>>,
 ) {
     match kept {
-        Some(kept) => forward_generic::<true, F>(list, proj, rect, acc, kept),
-        None => forward_generic::<false, F>(list, proj, rect, acc, &mut Vec::new()),
+        Some(kept) => forward_generic::<true>(list, proj, rect, acc, kept),
+        None => forward_generic::<false>(list, proj, rect, acc, &mut Vec::new()),
     }
 }
 
@@ -313,7 +327,7 @@ mod simd {
         acc: &mut Planes,
         kept: Option<&mut Vec<f32>>,
     ) {
-        forward_any::<true>(list, proj, rect, acc, kept)
+        forward_any(list, proj, rect, acc, kept)
     }
 
     #[target_feature(enable = "avx2,fma")]
@@ -336,8 +350,8 @@ mod tests {
     use crate::fit::lanes::ProjGrad;
 
     /// A tile's forward pass (image and kept alphas) and its backward passes (all
-    /// gradients and colours only) for `d`, in the build `F`; `keep` decides whether the
-    /// backward passes read the kept alphas.
+    /// gradients and colours only) for `d`, the backward in the build `F`; `keep` decides
+    /// whether the backward passes read the kept alphas.
     fn tile_passes<const F: bool>(
         list: &[u32],
         proj: &[Projected],
@@ -347,7 +361,7 @@ mod tests {
     ) -> (Planes, Vec<f32>, [Vec<ProjGrad>; 2]) {
         let mut acc = Planes::zero();
         let mut kept = Vec::new();
-        forward_any::<F>(list, proj, rect, &mut acc, Some(&mut kept));
+        forward_any(list, proj, rect, &mut acc, Some(&mut kept));
         let grads = [true, false].map(|all| {
             let mut out = vec![ProjGrad::default(); list.len()];
             let k = keep.then_some(&kept[..]);
@@ -357,10 +371,12 @@ mod tests {
         (acc, kept, grads)
     }
 
-    /// The module's promises: the alphas kept by a forward pass give the backward pass
-    /// the bits of a fresh evaluation; the SIMD build gives the bits of the portable
-    /// loops with fused multiply-adds (each is one correctly rounded operation whoever
-    /// computes it); and fusing moves the results by rounding alone.
+    /// The module's promises: the forward pass gives the decoder's pixels (the per-pixel
+    /// rule in its plainest form, [`Projected::alpha_at`], summed in list order) bit for
+    /// bit, in the portable build and the SIMD one; the alphas kept by a forward pass give
+    /// the backward pass the bits of a fresh evaluation; the SIMD backward pass gives the
+    /// bits of the portable loops with fused multiply-adds (each is one correctly rounded
+    /// operation whoever computes it); and fusing moves the gradients by rounding alone.
     #[test]
     fn the_builds_and_the_kept_alphas_agree() {
         use gsi_format::model::Blend;
@@ -380,6 +396,7 @@ mod tests {
         // Sums with cancellation (`d` has both signs): a bound on rounding, far below
         // what a wrong term would move.
         let close = |a: f32, b: f32| (a - b).abs() <= 1e-3 * (1.0 + a.abs().max(b.abs()));
+        let mut lit = 0;
         for t in 0..tiles.len() {
             let rect = Rect::of_tile(t, tiles.tiles_x, w, h);
             let list = tiles.list(t);
@@ -388,16 +405,28 @@ mod tests {
                 .flatten()
                 .for_each(|v| *v = rng.range(-1.0, 1.0));
             let plain = tile_passes::<false>(list, &proj, rect, &d, false);
+            for j in rect.y0..rect.y1 {
+                for i in rect.x0..rect.x1 {
+                    let mut want = [0f32; 3];
+                    for &k in list {
+                        let g = &proj[k as usize];
+                        if let Some(a) = g.alpha_at(i, j, Blend::Sum) {
+                            for (w, c) in want.iter_mut().zip(g.color) {
+                                *w += c * a;
+                            }
+                        }
+                    }
+                    let at = ((j - rect.y0) * TILE + i - rect.x0) as usize;
+                    let got = [0, 1, 2].map(|ch| plain.0 .0[ch][at]);
+                    assert!(got == want, "tile {t}, pixel ({i}, {j}): {got:?} {want:?}");
+                    lit += usize::from(want != [0.0; 3]);
+                }
+            }
             let plain_kept = tile_passes::<false>(list, &proj, rect, &d, true);
             assert!(plain.2 == plain_kept.2, "tile {t}: kept alphas, unfused");
             let fused = tile_passes::<true>(list, &proj, rect, &d, false);
             let fused_kept = tile_passes::<true>(list, &proj, rect, &d, true);
             assert!(fused.2 == fused_kept.2, "tile {t}: kept alphas, fused");
-            let pixels = plain.0 .0.iter().flatten().zip(fused.0 .0.iter().flatten());
-            assert!(
-                pixels.clone().all(|(a, b)| close(*a, *b)),
-                "tile {t}: fused image"
-            );
             for (a, b) in plain.2.iter().flatten().zip(fused.2.iter().flatten()) {
                 let (a, b) = (a.to_slot(), b.to_slot());
                 assert!(
@@ -412,7 +441,7 @@ mod tests {
                 // SAFETY: the CPU has the features, checked just above.
                 unsafe { simd::forward(list, &proj, rect, &mut acc, Some(&mut kept)) };
                 assert!(
-                    acc.0 == fused.0 .0 && kept == fused.1,
+                    acc.0 == plain.0 .0 && kept == plain.1,
                     "tile {t}: SIMD forward"
                 );
                 for (all, want) in [true, false].into_iter().zip(&fused.2) {
@@ -423,5 +452,6 @@ mod tests {
                 }
             }
         }
+        assert!(lit > (w * h) as usize / 2, "the scene lights {lit} pixels");
     }
 }

@@ -3,9 +3,8 @@
 //! Both passes apply the per-pixel rule of [`Projected::alpha_at`] over the same
 //! projection ([`gsi_render::render::project`]) and tile lists as the decoder. In `alpha`
 //! blending the forward pass gives the decoder's pixels bit for bit; `sum` blending, the
-//! default, goes through `fit::lanes`, eight pixels at a time, within 1e-5 (relative
-//! to 1 + the value) of the decoder's pixels where it fuses multiply-adds, bit for bit
-//! where it does not (test `forward_matches_the_decoder`).
+//! default, goes through `fit::lanes`, eight pixels at a time, and gives the decoder's
+//! pixels bit for bit too (test `forward_matches_the_decoder`).
 //! The file an encode writes is measured with the decoder itself.
 //!
 //! The backward pass returns, for each projected Gaussian, the gradient with respect to

@@ -33,8 +33,10 @@
 //! at half the speed. LLVM inlines some closures and not others; the hot ones here are
 //! functions.)
 //!
-//! The encoder's loops (`gsi_fit::fit`) share [`Footprint`] and the polynomial; they
-//! may fuse multiply-adds (`F`), since a fit needs the decoder's values, not its bits.
+//! The encoder's loops (`gsi_fit::fit`) share [`Footprint`] and the polynomial. Their
+//! forward pass takes the row-independent part of a chunk's powers once per chunk
+//! ([`Footprint::column`]) and gives this rule's bits; their backward pass may fuse
+//! multiply-adds (`F`), since a gradient needs the decoder's values, not its bits.
 
 use super::project::{offset, Projected, Rect};
 use super::{BAND, TILE};
@@ -197,6 +199,70 @@ impl Footprint<'_> {
         let first = self.x0 + (c * LANES) as u32;
         std::array::from_fn(|l| offset(first.wrapping_add(l as u32), self.g.mean[0]))
     }
+
+    /// What [`Footprint::alphas`] computes on chunk `c` that is the same on every row:
+    /// for loops that walk a chunk's rows one after another (the fit's), which then
+    /// compute per row only what depends on `dy` ([`Footprint::column_alphas`]).
+    #[cfg(feature = "encode")]
+    #[inline(always)]
+    pub fn column(&self, c: usize) -> Column {
+        let [ca, cb, _] = self.g.conic;
+        let dx = self.dxs(c);
+        let (lx0, lx1) = self.box_lanes(c * LANES);
+        Column {
+            dx,
+            a_dx: dx.map(|x| ca * x),
+            b_dx: dx.map(|x| cb * x),
+            inside: std::array::from_fn(|l| (l as i32 >= lx0) & ((l as i32) < lx1)),
+        }
+    }
+
+    /// [`Footprint::alphas`] on the chunk of `col` at the row `dy` from the centre, bit
+    /// for bit (the same operations, the row-independent ones taken from `col`); `None`
+    /// where every lane's power is below the cut-off, so that every alpha is 0. Of the
+    /// chunk-rows a fit's forward pass walks, those are the corners of rotated and
+    /// elongated boxes, which then cost a compare instead of an `exp`.
+    #[cfg(feature = "encode")]
+    #[inline(always)]
+    pub fn column_alphas<const F: bool>(&self, col: &Column, dy: f32) -> Option<V> {
+        let g = self.g;
+        let cdy = g.conic[2] * dy * dy;
+        // -0.5·(A dx² + C dy²) − B dx dy, as in `powers`.
+        let power: V = std::array::from_fn(|l| {
+            mla::<F>(
+                -0.5,
+                mla::<F>(col.a_dx[l], col.dx[l], cdy),
+                -(col.b_dx[l] * dy),
+            )
+        });
+        if self.dark(&power) {
+            return None;
+        }
+        let cut = g.cutoff();
+        let mut alpha = [0f32; LANES];
+        for l in 0..LANES {
+            let p = power[l];
+            let mut a = g.opacity * exp_in_range::<F>(p);
+            a = if p >= cut { a } else { 0.0 };
+            a = if p <= 0.0 { a } else { 0.0 };
+            a = if a >= ALPHA_MIN { a } else { 0.0 };
+            alpha[l] = if col.inside[l] { a } else { 0.0 };
+        }
+        Some(alpha)
+    }
+}
+
+/// The row-independent part of [`Footprint::alphas`] on one chunk ([`Footprint::column`]).
+#[cfg(feature = "encode")]
+#[derive(Clone, Copy, Debug)]
+pub struct Column {
+    /// Each column's offset from the centre.
+    pub dx: V,
+    /// `A·dx` and `B·dx` of the power.
+    a_dx: V,
+    b_dx: V,
+    /// Whether the column lies in the box.
+    inside: [bool; LANES],
 }
 
 /// Which build of the loops runs: the portable one, or one for a CPU feature detected at
