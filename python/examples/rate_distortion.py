@@ -1,6 +1,6 @@
 """PSNR against bits per pixel for a folder of images.
 
-    python examples/rate_distortion.py FOLDER [--bpp 0.25 0.5 1.0] [--effort 5]
+    python examples/rate_distortion.py FOLDER [--bpp 0.25 0.5 1.0] [--effort N]
         [--plot rd.png]
 
 Loads every image in FOLDER with Pillow, encodes it at each budget, decodes it and measures
@@ -27,7 +27,7 @@ def psnr(a: np.ndarray, b: np.ndarray) -> float:
     return float("inf") if mse == 0 else 10 * np.log10(255.0**2 / mse)
 
 
-def measure(folder: Path, budgets: List[float], effort: int) -> Dict[str, List[tuple]]:
+def measure(folder: Path, budgets: List[float], effort: Optional[int]) -> Dict[str, List[tuple]]:
     """`{image name: [(bpp as stored, PSNR), ...]}`."""
     curves = {}
     for path in sorted(folder.iterdir()):
@@ -73,7 +73,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("folder", type=Path)
     p.add_argument("--bpp", type=float, nargs="+", default=[0.25, 0.5, 1.0])
-    p.add_argument("--effort", type=int, default=5)
+    p.add_argument("--effort", type=int, default=None, help="1..9 (default: gsi's)")
     p.add_argument("--plot", type=Path, default=Path("rd.png"))
     args = p.parse_args(argv)
     curves = measure(args.folder, args.bpp, args.effort)

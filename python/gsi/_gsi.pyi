@@ -15,7 +15,7 @@ def encode(
     bpp: Optional[float] = ...,
     gaussians: Optional[int] = ...,
     target_psnr: Optional[float] = ...,
-    effort: int = ...,
+    effort: Optional[int] = ...,
     blend: str = ...,
     seed: int = ...,
     device: str = ...,

@@ -173,7 +173,7 @@ fn budget(
 
 /// Fit Gaussians to `samples` and return the file's bytes.
 #[pyfunction]
-#[pyo3(signature = (samples, bits, width, height, *, bpp=None, gaussians=None, target_psnr=None, effort=5, blend="sum", seed=0, device="cpu", progress=None))]
+#[pyo3(signature = (samples, bits, width, height, *, bpp=None, gaussians=None, target_psnr=None, effort=None, blend="sum", seed=0, device="cpu", progress=None))]
 #[allow(clippy::too_many_arguments)]
 fn encode<'py>(
     py: Python<'py>,
@@ -184,7 +184,7 @@ fn encode<'py>(
     bpp: Option<f32>,
     gaussians: Option<i64>,
     target_psnr: Option<f32>,
-    effort: u8,
+    effort: Option<u8>,
     blend: &str,
     seed: u64,
     device: &str,
@@ -196,9 +196,12 @@ fn encode<'py>(
         seed,
         ..EncodeOptions::default()
     };
-    fit::Effort::new(effort)
-        .ok_or_else(|| fail(format!("effort {effort} is not in 1..=9")))?
-        .apply(&mut opts);
+    match effort {
+        None => fit::Effort::DEFAULT,
+        Some(level) => fit::Effort::new(level)
+            .ok_or_else(|| fail(format!("effort {level} is not in 1..=9")))?,
+    }
+    .apply(&mut opts);
     let target = target(samples, bits, width, height).map_err(fail)?;
     let mut reporter = Reporter::new(progress.as_ref());
     let bytes = py.detach(|| -> Result<Vec<u8>, String> {

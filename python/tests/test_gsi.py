@@ -45,6 +45,15 @@ def test_encode_bpp_and_alpha_match_the_cli(cli, tmp_path, image):
     assert gsi.encode(image, bpp=2.0, blend="alpha", effort=1) == out.read_bytes()
 
 
+def test_encode_takes_the_cli_default_effort(cli, tmp_path, image):
+    png = tmp_path / "in.png"
+    Image.fromarray(image).save(png)
+    out = tmp_path / "out.gsi"
+    cli("encode", png, "-o", out, "--gaussians", 40, "--device", "cpu", "--quiet")
+    assert gsi.encode(image, gaussians=40) == out.read_bytes()
+    assert gsi.encode(image, gaussians=40, effort=1) != out.read_bytes()
+
+
 def test_decode_matches_the_cli(cli, tmp_path, encoded):
     f = tmp_path / "x.gsi"
     f.write_bytes(encoded)

@@ -201,7 +201,7 @@ impl Default for EncodeOptions {
     fn default() -> Self {
         EncodeOptions {
             budget: Budget::Bpp(1.0),
-            iterations: 600,
+            iterations: 800,
             coarse: Some(Coarse {
                 factor: 2,
                 fraction: 0.5,
