@@ -106,8 +106,9 @@ def encode(
     ``image`` is H×W (grey) or H×W×3 (H×W×4: alpha dropped), ``uint8``, ``uint16`` or float
     in [0, 1]. The budget is one of ``bpp`` (bits per pixel of the whole file), ``gaussians``
     or ``target_psnr`` (dB); 1 bpp when none is given. ``effort`` runs from 1 (fast) to 9
-    (thorough), ``gsi encode``'s default when not given; ``blend`` is ``"sum"`` or ``"alpha"``; ``device`` is ``"cpu"``, ``"gpu"``
-    (any adapter) or ``"auto"`` (a hardware GPU when there is one). The same image, options
+    (thorough), ``gsi encode``'s default when not given; ``blend`` is ``"sum"`` or
+    ``"alpha"``; ``device`` is ``"cpu"``, ``"gpu"`` (any adapter) or ``"auto"`` (a hardware
+    GPU when there is one). The same image, options
     and seed give the same bytes as ``gsi encode`` on the same machine.
 
     ``progress``, if given, is called with a dict (``stage``, ``work`` in [0, 1],

@@ -196,12 +196,12 @@ fn encode<'py>(
         seed,
         ..EncodeOptions::default()
     };
-    match effort {
-        None => fit::Effort::DEFAULT,
-        Some(level) => fit::Effort::new(level)
-            .ok_or_else(|| fail(format!("effort {level} is not in 1..=9")))?,
+    // Without a level the options stay the default effort's.
+    if let Some(level) = effort {
+        fit::Effort::new(level)
+            .ok_or_else(|| fail(format!("effort {level} is not in 1..=9")))?
+            .apply(&mut opts);
     }
-    .apply(&mut opts);
     let target = target(samples, bits, width, height).map_err(fail)?;
     let mut reporter = Reporter::new(progress.as_ref());
     let bytes = py.detach(|| -> Result<Vec<u8>, String> {

@@ -13,7 +13,7 @@
 //! pass does not fuse: it does the decoder's operations in the decoder's order (spec §6),
 //! so the fit renders the pixels the per-pixel rule decodes, bit for bit, and LLVM
 //! vectorizes it whole, where with `mul_add` in the polynomial of `exp` it left most lanes
-//! scalar (kodim23 at 1 bpp, whole encode: 12.1 → 9.6 s of CPU with the chunk-rows below
+//! scalar (kodim23 at 1 bpp, whole encode: 11.8 → 9.3 s of CPU with the chunk-rows below
 //! the cut-off skipped as well). Between the portable and the AVX2 build, files differ
 //! by the backward pass's rounding (the PSNR by hundredths of a dB). An encoder promises
 //! no more.
@@ -140,7 +140,7 @@ fn forward_generic<const KEEP: bool>(
             let column = f.column(chunk);
             for j in f.ys.clone() {
                 let dy = (j as f32 + 0.5) - g.mean[1];
-                let Some(alpha) = f.column_alphas::<false>(&column, dy) else {
+                let Some(alpha) = f.column_alphas(&column, dy) else {
                     // Every alpha is 0: adding nothing leaves the sums as they are.
                     if KEEP {
                         kept.extend_from_slice(&[0.0; LANES]);
@@ -197,7 +197,7 @@ fn backward_generic<const ALL: bool, const KEPT: bool, const F: bool>(
                     let a = kept.next().unwrap_or(&[0.0; LANES][..]);
                     std::array::from_fn(|l| a[l])
                 } else {
-                    match f.column_alphas::<false>(&column, dy) {
+                    match f.column_alphas(&column, dy) {
                         Some(alpha) => alpha,
                         None => continue,
                     }
