@@ -70,6 +70,31 @@ mod corpus {
         Records::from_scene(&random_scene(seed, spec), BitDepths::default())
     }
 
+    /// A `log-scale-rotation` scene of `n` Gaussians at the `sum` encoder's depths, its
+    /// angles shaped (§5.4.5), in curve order.
+    fn shaped(seed: u64, blend: Blend, n: usize) -> Records {
+        let scene = random_scene(
+            seed,
+            SceneSpec {
+                cov_param: CovParam::LogScaleRotation,
+                with_opacity: blend == Blend::Alpha,
+                ..SceneSpec::new(192, 128, n, blend)
+            },
+        );
+        let bits = BitDepths {
+            position: 12,
+            covariance: 6,
+            angle: 7,
+            angle_by_shape: true,
+            color: 8,
+            opacity: 6,
+        };
+        let mut r = Records::from_scene(&scene, bits);
+        assert!(r.covariance.shape.is_some(), "shaped");
+        r.sort_spatially();
+        r
+    }
+
     pub fn valid() -> Vec<CorpusFile> {
         use Blend::{Alpha, Sum};
         use CovParam::{Cholesky, LogScaleRotation as Lsr};
@@ -127,6 +152,7 @@ mod corpus {
             position: 10,
             covariance: 6,
             angle: 6,
+            angle_by_shape: false,
             color: 5,
             opacity: 4,
         };
@@ -190,10 +216,32 @@ mod corpus {
             ),
             expect: None,
         });
+        // Method 4 (§5.4.5), version 1.7: angles at the precision of their shape, as the
+        // encoder writes `sum` files, and beside opacity in an `alpha` file.
+        const M4: u8 = format::METHOD_SHAPED;
+        out.push(CorpusFile {
+            name: "coded4-sum-lsr-3000-shaped.gsi".into(),
+            bytes: coded(
+                &shaped(14, Sum, 3000),
+                [&[3, 3], &[0, 1, 5], &[0, 1, 1], &[]],
+                M4,
+            ),
+            expect: None,
+        });
+        out.push(CorpusFile {
+            name: "coded4-alpha-lsr-500-shaped-opacity.gsi".into(),
+            bytes: coded(
+                &shaped(18, Alpha, 500),
+                [&[2, 2], &[4, 2, 5], &[0, 1, 2], &[4]],
+                M4,
+            ),
+            expect: None,
+        });
         let wide = BitDepths {
             position: 24,
             covariance: 24,
             angle: 24,
+            angle_by_shape: false,
             color: 12,
             opacity: 9,
         };
@@ -520,6 +568,7 @@ mod corpus {
                 position: 24,
                 covariance: 24,
                 angle: 24,
+                angle_by_shape: false,
                 color: 8,
                 opacity: 8,
             },
@@ -859,6 +908,7 @@ mod corpus {
         ));
         coded_invalid(&base_records, &mut files);
         coded_raw_invalid(&base_records, &mut files);
+        coded_shaped_invalid(&mut files);
         files
             .into_iter()
             .map(|(kind, what, bytes)| CorpusFile {
@@ -931,6 +981,7 @@ mod corpus {
             let a = format::Attribute {
                 quantizers: vec![q; comps],
                 codes: all,
+                shape: None,
             };
             let mut d = a.to_coded_payload(modes, 2).expect("valid modes");
             d[1 + 9 * k] = 3;
@@ -1011,6 +1062,45 @@ mod corpus {
         }));
         files.push((K::InvalidValue, "coded3-mode-5", {
             edit(ChunkType::COVARIANCE, &|d| d[35] = 5)
+        }));
+    }
+
+    /// Malformed payloads of method 4 (§5.4.5), each in a file that is otherwise shaped and
+    /// valid. The `GCOV` payload has its modes at 33, the shape offset at 36, the length
+    /// of its raw bits at 40, its stream from 44.
+    fn coded_shaped_invalid(files: &mut Vec<(ErrorKind, &'static str, Vec<u8>)>) {
+        use ErrorKind as K;
+        let records = shaped(19, Blend::Sum, 300);
+        let base = coded(&records, [&[3, 3], &[0, 1, 5], &[0, 1, 1], &[]], 4);
+        let parts = chunks(&base);
+        let at = |ty: ChunkType| parts.iter().position(|(t, _)| *t == ty).expect("chunk");
+        let edit = |f: &dyn Fn(&mut Vec<u8>)| {
+            let mut p = parts.clone();
+            f(&mut p[at(ChunkType::COVARIANCE)].1);
+            assemble(&p)
+        };
+        let raw_len = |d: &[u8]| u32::from_be_bytes(d[40..44].try_into().expect("4 bytes"));
+        assert_eq!(parts[at(ChunkType::COVARIANCE)].1[28], 4, "method 4");
+        files.push((K::InvalidValue, "coded4-shape-offset-nan", {
+            edit(&|d| d[36..40].copy_from_slice(&f32::NAN.to_be_bytes()))
+        }));
+        files.push((K::InvalidValue, "coded4-shaped-first-component", {
+            edit(&|d| d[33] = 5)
+        }));
+        files.push((K::InvalidValue, "coded4-mode-6", edit(&|d| d[35] = 6)));
+        files.push((K::Decompression, "coded4-shape-offset-moved", {
+            // Four bits more for every angle: the raw bits end before the last code.
+            edit(&|d| {
+                let o = f32::from_be_bytes(d[36..40].try_into().expect("4 bytes"));
+                d[36..40].copy_from_slice(&(o + 4.0).to_be_bytes())
+            })
+        }));
+        files.push((K::Decompression, "coded4-shaped-raw-bits-cut", {
+            edit(&|d| {
+                let n = raw_len(d);
+                d.pop();
+                d[40..44].copy_from_slice(&(n - 1).to_be_bytes());
+            })
         }));
     }
 

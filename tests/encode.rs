@@ -242,7 +242,7 @@ fn opacity_is_not_stored_when_not_needed() {
 }
 
 #[test]
-fn sum_files_are_written_along_the_curve_with_method_3() {
+fn sum_files_are_written_along_the_curve_with_shaped_angles() {
     let t = scene_like(128, 96);
     let e = encode(
         &t,
@@ -252,10 +252,13 @@ fn sum_files_are_written_along_the_curve_with_method_3() {
     )
     .unwrap();
     let f = read_file(&e.bytes[..], Limits::default()).unwrap();
+    // Method 4 (§5.4.5): the angles at the precision of their shape, version 1.7.
     assert_eq!(
         f.records.header.version_minor,
-        gsi::format::VERSION_MINOR_CODED_RAW
+        gsi::format::VERSION_MINOR_SHAPED
     );
+    assert!(f.records.covariance.shape.is_some());
+    assert_eq!(f.records.covariance, e.records.covariance);
     let n = f.records.header.count as usize;
     let (u, v) = f.records.positions.codes.split_at(n);
     let keys: Vec<u64> = (0..n)
@@ -281,10 +284,11 @@ fn sum_files_are_written_along_the_curve_with_method_3() {
     .sum();
     assert!(
         coded < packed,
-        "method 3: {coded} bytes, 1.0 codings {packed}"
+        "methods 3 and 4: {coded} bytes, 1.0 codings {packed}"
     );
     assert!(e.float_psnr.is_finite() && e.psnr.is_finite());
-    // Angles are stored within a quarter turn, in 7 bits; the log-scales take 6.
+    // Angles are stored within a quarter turn, at most 10 bits each (the noise of 8 for
+    // all); the log-scales take 6.
     let angle = f.records.covariance.quantizers[2];
     let eighth = std::f32::consts::FRAC_PI_4;
     assert!(
@@ -295,7 +299,7 @@ fn sum_files_are_written_along_the_curve_with_method_3() {
     );
     assert_eq!(
         [angle.bits, f.records.covariance.quantizers[0].bits],
-        [7, 6],
+        [10, 6],
         "angle and scale bits"
     );
 }

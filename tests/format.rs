@@ -40,7 +40,7 @@ fn spec_worked_example_matches_the_encoder() {
 /// §9.1 and §9.2: each coded payload of the spec decodes to its codes, and the encoder
 /// writes exactly those bytes in the same method and modes.
 #[test]
-fn spec_method_2_and_3_examples_decode() {
+fn spec_method_2_3_and_4_examples_decode() {
     let q = |bits| format::Quantizer {
         bits,
         min: 0.0,
@@ -49,20 +49,40 @@ fn spec_method_2_and_3_examples_decode() {
     let pos = format::Attribute {
         quantizers: vec![q(4), q(4)],
         codes: vec![1, 3, 12, 2, 2, 9],
+        shape: None,
     };
     let col = format::Attribute {
         quantizers: vec![q(3), q(3), q(3)],
         codes: vec![7, 1, 4, 6, 1, 5, 6, 0, 5],
+        shape: None,
     };
     let cov = format::Attribute {
         quantizers: vec![q(7), q(7), q(7)],
         codes: vec![100, 37, 64, 101, 36, 70, 5, 127, 64],
+        shape: None,
+    };
+    // Log-scales of 3 bits over [−8, −1] (values −8 + q) and a 4-bit angle, shaped.
+    let scale = format::Quantizer {
+        bits: 3,
+        min: -8.0,
+        max: -1.0,
+    };
+    let angle = format::Quantizer {
+        bits: 4,
+        min: -std::f32::consts::FRAC_PI_4,
+        max: std::f32::consts::FRAC_PI_4,
+    };
+    let shaped = format::Attribute {
+        quantizers: vec![scale, scale, angle],
+        codes: vec![4, 5, 6, 4, 3, 0, 8, 11, 2],
+        shape: Some(7.0),
     };
     let examples = [
         ("### 9.1 Method 2 payloads", 2, 1, &pos, &[3u8, 3][..]),
         ("### 9.1 Method 2 payloads", 2, 2, &col, &[0, 1, 2][..]),
         ("### 9.2 Method 3 payloads", 3, 1, &pos, &[3, 3][..]),
         ("### 9.2 Method 3 payloads", 3, 2, &cov, &[0, 1, 4][..]),
+        ("### 9.3 A method 4 payload", 4, 1, &shaped, &[4, 4, 5][..]),
     ];
     for (section, method, nth, attribute, modes) in examples {
         let bytes = spec_block(section, nth);
@@ -326,7 +346,7 @@ fn put_chunk(out: &mut Vec<u8>, ty: ChunkType, data: &[u8]) {
 
 /// §2.5, §7.4: a stage-2 rewrite keeps `GHDR` byte for byte, so its colours take only a
 /// coded method that the file's minor version allows: none before 1.1, method 2 in
-/// 1.1–1.5, method 3 from 1.6.
+/// 1.1–1.5, method 3 from 1.6 (method 4 of 1.7 is for shaped angles, never colours).
 #[test]
 fn a_stage_2_rewrite_codes_colours_only_in_a_method_its_minor_allows() {
     let corpus = concat!(env!("CARGO_MANIFEST_DIR"), "/corpus/valid/");

@@ -46,9 +46,11 @@ pub struct Args {
     iterations: Option<u32>,
     /// Expert override of the bit depths, `POSITION,COVARIANCE,COLOUR,OPACITY[,ANGLE]`
     /// (each 1..=24; without ANGLE, one bit under the covariance's scales); by default
-    /// they are chosen from the image size (for 768×512 in `sum` mode: 12,6,8,6,7), and
+    /// they are chosen from the image size (for 768×512 in `sum` mode: 12,6,8,6,8), and
     /// in `sum` mode the colour's from the fit's error (5 to 10 bits: coarser where the
-    /// Gaussians cannot follow the texture, so that the bits buy more of them).
+    /// Gaussians cannot follow the texture, so that the bits buy more of them). In `sum`
+    /// mode each angle keeps the bits its Gaussian's shape needs, ANGLE being the uniform
+    /// depth whose noise they match (none for a round Gaussian, ANGLE + 2 for the thinnest).
     #[arg(long, value_name = "P,C,K,O[,A]")]
     bits: Option<String>,
     /// Initialization: content-adaptive, or the paper's random cold start.
@@ -86,7 +88,7 @@ enum LossArg {
     L1MsSsim,
 }
 
-#[derive(Clone, Copy, clap::ValueEnum)]
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 enum BlendArg {
     Sum,
     Alpha,
@@ -135,7 +137,15 @@ fn options(args: &Args) -> Result<EncodeOptions, Failure> {
     if args.iterations == Some(0) {
         return Err(Failure("--iterations must be at least 1".into()));
     }
-    let bits = args.bits.as_deref().map(parse_bits).transpose()?;
+    let bits = args
+        .bits
+        .as_deref()
+        .map(parse_bits)
+        .transpose()?
+        .map(|b| BitDepths {
+            angle_by_shape: args.blend == BlendArg::Sum,
+            ..b
+        });
     let mut leveled = EncodeOptions::default();
     fit::Effort::new(args.effort)
         .ok_or_else(|| Failure(format!("--effort {} is not in 1..=9", args.effort)))?
@@ -184,6 +194,7 @@ fn parse_bits(s: &str) -> Result<BitDepths, Failure> {
         position,
         covariance,
         angle,
+        angle_by_shape: false,
         color,
         opacity,
     })

@@ -14,6 +14,7 @@ const BITS: BitDepths = BitDepths {
     position: 12,
     covariance: 8,
     angle: 8,
+    angle_by_shape: false,
     color: 8,
     opacity: 6,
 };

@@ -5,9 +5,9 @@
 //! `cargo run --manifest-path fuzz/Cargo.toml --features seeds --example gen_seeds [OUT_DIR]`
 //!
 //! `parse/` gets the files as they are; `decode/` gets each with a two-byte prefix that
-//! the `decode` target reads as its output size. `coded/` gets method-2 and method-3 payloads in the
-//! `coded` target's input layout: positions in Morton mode, covariance and colours in
-//! mixed modes, at several depths.
+//! the `decode` target reads as its output size. `coded/` gets method-2, 3 and 4 payloads
+//! in the `coded` target's input layout: positions in Morton mode, covariance and colours
+//! in mixed modes, shaped angles, at several depths.
 
 use gsi::format::{to_bytes, BitDepths, ChunkType, RawChunk, Records, WriteOptions};
 use gsi::model::{Blend, CovParam, GaussianSet, Scene};
@@ -29,6 +29,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         position: 16,
         covariance: 12,
         angle: 12,
+        angle_by_shape: false,
         color: 8,
         opacity: 8,
     };
@@ -36,6 +37,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         position: 3,
         covariance: 5,
         angle: 5,
+        angle_by_shape: false,
         color: 7,
         opacity: 1,
     };
@@ -43,6 +45,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         position: 24,
         covariance: 24,
         angle: 24,
+        angle_by_shape: false,
         color: 24,
         opacity: 24,
     };
@@ -50,6 +53,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         position: 0,
         covariance: 0,
         angle: 0,
+        angle_by_shape: false,
         color: 0,
         opacity: 0,
     };
@@ -173,6 +177,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         );
         let mut records = Records::from_scene(&scene, bits);
         records.sort_spatially();
+        // The angles shaped as the encoder shapes them (§5.4.5), for method 4's mode 5.
+        let shaped = Records::from_scene(
+            &scene,
+            BitDepths {
+                angle_by_shape: true,
+                ..bits
+            },
+        );
         for (method, attr, a, modes) in [
             (2, "pos", &records.positions, &[3u8, 3][..]),
             (2, "cov", &records.covariance, &[0, 1, 2][..]),
@@ -180,11 +192,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             (3, "pos3", &records.positions, &[3u8, 3][..]),
             (3, "cov3", &records.covariance, &[0, 1, 4][..]),
             (3, "col3", &records.colors, &[2, 1, 1][..]),
+            (4, "cov4", &shaped.covariance, &[0, 1, 5][..]),
         ] {
             let payload = a.to_coded_payload(modes, method).expect("valid modes");
             let k = a.components();
-            // The top bit chooses method 3.
-            let mut input = vec![(k - 1) as u8 | if method == 3 { 0x80 } else { 0 }];
+            // The top bit chooses method 3, both top bits method 4.
+            let top = match method {
+                2 => 0,
+                3 => 0x80,
+                _ => 0xC0,
+            };
+            let mut input = vec![(k - 1) as u8 | top];
             input.extend((a.count() as u16).to_be_bytes());
             input.extend(a.quantizers.iter().map(|q| q.bits));
             // Modes and stream follow the preamble unchanged.

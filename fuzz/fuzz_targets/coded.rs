@@ -1,10 +1,11 @@
-//! Any bytes as the coded data of a method-2 or method-3 attribute payload (format-spec.md
-//! §5.4, §5.4.4), behind a preamble the input chooses: `Ok` or `Err`, never a panic, a
-//! hang or an allocation beyond the codes the count declares. Input: a byte whose top bit
-//! chooses method 3 and whose low bits the components (1 + (byte & 0x7F) % 3), count
-//! (u16, big-endian, at most 4096), one byte per component for its width (% 25), one mode
-//! byte per component (any value, so invalid modes are met too), then the rest of the
-//! data (method 2: the stream; method 3: the raw bits' length, the stream, the raw bits).
+//! Any bytes as the coded data of a method-2, 3 or 4 attribute payload (format-spec.md
+//! §5.4, §5.4.4, §5.4.5), behind a preamble the input chooses: `Ok` or `Err`, never a
+//! panic, a hang or an allocation beyond the codes the count declares. Input: a byte whose
+//! top bit chooses method 3, both top bits method 4, and whose low bits the components
+//! (1 + (byte & 0x3F) % 3), count (u16, big-endian, at most 4096), one byte per component
+//! for its width (% 25), one mode byte per component (any value, so invalid modes are met
+//! too), then the rest of the data (method 2: the stream; method 3: the raw bits' length,
+//! the stream, the raw bits; method 4: the shape offset where a mode is 5, then as method 3).
 //!
 //! An accepted payload must hold codes within each quantizer's range, and coding those
 //! codes again in the same modes must give a payload that decodes to the same codes.
@@ -18,8 +19,12 @@ fuzz_target!(|data: &[u8]| {
     let [k, c0, c1, rest @ ..] = data else {
         return;
     };
-    let method = if *k & 0x80 != 0 { 3 } else { 2 };
-    let k = 1 + usize::from((*k & 0x7F) % 3);
+    let method = match *k >> 6 {
+        0 | 1 => 2,
+        2 => 3,
+        _ => 4,
+    };
+    let k = 1 + usize::from((*k & 0x3F) % 3);
     let count = u32::from(u16::from_be_bytes([*c0, *c1])).min(4096);
     if rest.len() < 2 * k {
         return;

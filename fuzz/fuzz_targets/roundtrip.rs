@@ -1,6 +1,6 @@
 //! Arbitrary Gaussian sets, non-finite floats included, through quantization, the
-//! encoder and the decoder, with the 1.0 codings and with method 3 after the encoder's
-//! curve order: the records read back are exactly the records written.
+//! encoder and the decoder, with the 1.0 codings and with methods 3 and 4 after the
+//! encoder's curve order: the records read back are exactly the records written.
 
 #![no_main]
 
@@ -26,6 +26,9 @@ struct Input {
     height: u16,
     alpha: bool,
     log_scale_rotation: bool,
+    /// Angles at the precision of their shape (§5.4.5), where the covariance is
+    /// `log-scale-rotation`.
+    angle_by_shape: bool,
     with_opacity: bool,
     /// Taken modulo 25: 0..=24 bits for position, covariance, colour and opacity.
     bits: [u8; 4],
@@ -85,6 +88,7 @@ fuzz_target!(|input: Input| {
             position,
             covariance,
             angle: covariance,
+            angle_by_shape: input.angle_by_shape,
             color,
             opacity,
         },
@@ -104,10 +108,10 @@ fuzz_target!(|input: Input| {
 
     let file =
         read_file(&bytes[..], Limits::default()).expect("reading back a freshly written file");
-    assert_eq!(
-        file.records, records,
-        "records change through write and read"
-    );
+    // The 1.0 codings keep the codes, not the shape offset that method 4 would code them by.
+    let mut plain = records.clone();
+    plain.covariance.shape = None;
+    assert_eq!(file.records, plain, "records change through write and read");
     assert_eq!(
         file.file_bytes,
         bytes.len() as u64,
@@ -124,8 +128,9 @@ fuzz_target!(|input: Input| {
     let back = file.records.to_scene();
     assert!(back.gaussians.all_finite());
 
-    // The encoder's way: curve order (for `sum`), method 3 where it is smaller, version 1.6
-    // exactly when some payload uses it; the same codes come back.
+    // The encoder's way: curve order (for `sum`), method 3 where it is smaller (4 where the
+    // angles are shaped and that is smaller), version 1.6 (1.7) exactly when some payload
+    // uses it; the same codes come back, and the shape offset where method 4 coded them.
     let mut sorted = records.clone();
     sorted.sort_spatially();
     let coded = WriteOptions {
@@ -150,7 +155,14 @@ fuzz_target!(|input: Input| {
         file.records.header.version_minor, minor,
         "the minor version against the payloads' methods"
     );
+    let cov = sorted
+        .covariance
+        .to_payload_with(level, true)
+        .expect("in-memory payload");
     let mut expected = sorted;
     expected.header.version_minor = minor;
+    if cov[1 + 9 * 3] != gsi::format::METHOD_SHAPED {
+        expected.covariance.shape = None;
+    }
     assert_eq!(file.records, expected, "records change through method 3");
 });

@@ -265,17 +265,24 @@ pub struct Encoded {
 /// * The scales take 6 bits rather than 8 (+0.23 dB at 1 bpp, +0.17 at 0.5, and +0.24
 ///   at effort 1): the stored colours are solved for the stored geometry, which absorbs most of what coarser scales cost. 5 bits lose again
 ///   (−0.27 dB at 1 bpp against 6). `alpha` mode was not measured again and keeps 8.
-/// * The angle, kept within a quarter turn, takes 7 bits: twice the
+/// * The angle, kept within a quarter turn, took 7 bits: twice the
 ///   precision the 8 bits over a free angle's range had, in as many bits. Of 6, 7 and 8
 ///   bits on the same images at 1 bpp, 7 and 8 were within 0.03 dB of each other and 6
 ///   lost 0.1 dB; with 6-bit scales, a 6-bit angle loses 0.12 dB.
+/// * In `sum` mode each angle now keeps the bits its Gaussian's shape needs (format 1.7,
+///   [`gsi_format::format::angle`]), at the noise of a uniform 8-bit angle, which takes
+///   about the bits that 7 uniform bits took. Of the noise of 6, 7, 8 and 9 uniform bits,
+///   on photos12 and eval15's normal-light images at 1 bpp against 7 uniform bits:
+///   −0.30, +0.12, +0.18 and about −0.01 dB (the buildings −0.96, −0.03, +0.27, +0.12);
+///   at 0.5 bpp 7 and 8 tie (+0.05, +0.06). `alpha` mode keeps 7 uniform bits.
 pub fn default_bits(width: u32, height: u32, blend: Blend) -> BitDepths {
     let side = width.max(height).max(2);
     let position = (32 - (side - 1).leading_zeros() + 2).clamp(6, 20) as u8;
     BitDepths {
         position,
         covariance: if blend == Blend::Sum { 6 } else { 8 },
-        angle: 7,
+        angle: if blend == Blend::Sum { 8 } else { 7 },
+        angle_by_shape: blend == Blend::Sum,
         color: if blend == Blend::Sum { 8 } else { 7 },
         opacity: 6,
     }
@@ -303,7 +310,7 @@ fn shrunk(n: usize, bpp: f32, budget: f32, px: f32) -> usize {
 }
 
 /// Bytes per Gaussian of `scene`'s attribute payloads as [`finish`] writes them
-/// (quantized with `bits`, in curve order, method 3 where it is smaller).
+/// (quantized with `bits`, in curve order, method 3 or 4 where it is smaller).
 fn coded_bytes_per_gaussian(scene: &Scene, bits: BitDepths) -> f32 {
     let mut r = Records::from_scene(scene, bits);
     r.sort_spatially();

@@ -224,6 +224,8 @@ impl<'g> ResidentFit<'g> {
                 } else {
                     CovParam::LogScaleRotation
                 };
+                // Angles shaped by their Gaussian (`angle_by_shape`) are rendered here at
+                // the uniform depth whose noise the shaping matches, not bucket by bucket.
                 let [_, _, angle] = b.of_covariance(cov);
                 u.bits = [b.position, b.covariance, b.color, b.opacity, angle]
                     .map(|b| u32::from(b.min(MAX_BITS)));

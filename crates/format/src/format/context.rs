@@ -1,6 +1,7 @@
-//! Compression methods 2 and 3 (spec §5.4): each component's codes predicted from what
+//! Compression methods 2, 3 and 4 (spec §5.4): each component's codes predicted from what
 //! is already decoded and range-coded with adaptive contexts; method 3 keeps the bits that
-//! contexts do not help with raw, beside the range-coded stream (§5.4.4).
+//! contexts do not help with raw, beside the range-coded stream (§5.4.4); method 4 adds
+//! angles that keep only the bits their Gaussian's shape needs (§5.4.5).
 //!
 //! Where the bits go, measured on Kodak at 1 bpp: positions are the largest field, and
 //! in curve order (the encoder writes `sum` files along a Morton curve, where the order of
@@ -11,6 +12,7 @@
 //! that codes it in fewest bits: its codes alone, its residual from the previous component
 //! of the same Gaussian, or its residual from the previous Gaussian.
 
+use super::angle;
 use super::coder::{
     Decoder, Encoder, Magnitude, MagnitudeCode, Meter, Signed, Sink, SplitMagnitude, Tree,
 };
@@ -25,6 +27,9 @@ pub enum Coding {
     /// Method 3 (§5.4.4, version 1.6): method 2's modes and predictions, the low bits of
     /// trees and magnitudes raw, a Morton step's `e` through a tree, and mode 4.
     Method3,
+    /// Method 4 (§5.4.5, version 1.7): method 3 and mode 5, an angle at the precision of
+    /// its Gaussian's shape.
+    Method4,
 }
 
 /// The code itself, through a `Tree`.
@@ -38,6 +43,9 @@ pub const MODE_ALONG: u8 = 2;
 pub const MODE_MORTON: u8 = 3;
 /// Method 3 only: the code's bits, raw (a component with no structure to model).
 pub const MODE_RAW: u8 = 4;
+/// Method 4 only, component 2 of three: as many of the code's leading bits, raw, as the
+/// Gaussian's log-scales (components 0 and 1) say its angle needs ([`angle::shape_bits`]).
+pub const MODE_SHAPED: u8 = 5;
 
 /// How a method turns codes into decisions and raw bits: the binarizations of §5.4.2
 /// (method 2) or §5.4.4 (method 3), as types, so that one loop serves both and each
@@ -49,8 +57,8 @@ trait Binarization {
     type Step: MagnitudeCode;
     /// The method whose binarization this is.
     const CODING: Coding;
-    /// Method 3: the data holds the length of its raw bits, and mode 4 is allowed.
-    const RAW: bool = matches!(Self::CODING, Coding::Method3);
+    /// Methods 3 and 4: the data holds the length of its raw bits, and mode 4 is allowed.
+    const RAW: bool = !matches!(Self::CODING, Coding::Method2);
     /// The tree of mode 0 for codes of `bits` bits.
     fn tree(bits: u8) -> Tree;
 }
@@ -74,6 +82,18 @@ impl Binarization for Method3 {
     type Residual = SplitMagnitude<false>;
     type Step = SplitMagnitude<true>;
     const CODING: Coding = Coding::Method3;
+    fn tree(bits: u8) -> Tree {
+        Tree::split(bits)
+    }
+}
+
+/// §5.4.5: method 3's binarizations, and mode 5.
+struct Method4;
+
+impl Binarization for Method4 {
+    type Residual = SplitMagnitude<false>;
+    type Step = SplitMagnitude<true>;
+    const CODING: Coding = Coding::Method4;
     fn tree(bits: u8) -> Tree {
         Tree::split(bits)
     }
@@ -114,27 +134,43 @@ fn across(from: &Quantizer, to: &Quantizer, q: u32) -> u32 {
 
 /// Code `count` planar codes (component 0 of every Gaussian, then component 1, …) by
 /// `coding`: the mode bytes, then the coded data, each component in the mode that codes
-/// it in fewest bits.
-pub fn encode(codes: &[u32], count: usize, qs: &[Quantizer], coding: Coding) -> Vec<u8> {
+/// it in fewest bits. `shape` is the offset of §5.4.5 that component 2's codes follow
+/// (see [`shaped`]); method 4 may then code them in mode 5.
+pub fn encode(
+    codes: &[u32],
+    count: usize,
+    qs: &[Quantizer],
+    shape: Option<f32>,
+    coding: Coding,
+) -> Vec<u8> {
     match coding {
-        Coding::Method2 => encode_by::<Method2>(codes, count, qs),
-        Coding::Method3 => encode_by::<Method3>(codes, count, qs),
+        Coding::Method2 => encode_by::<Method2>(codes, count, qs, None),
+        Coding::Method3 => encode_by::<Method3>(codes, count, qs, None),
+        Coding::Method4 => encode_by::<Method4>(codes, count, qs, shape),
     }
 }
 
-fn encode_by<B: Binarization>(codes: &[u32], count: usize, qs: &[Quantizer]) -> Vec<u8> {
+fn encode_by<B: Binarization>(
+    codes: &[u32],
+    count: usize,
+    qs: &[Quantizer],
+    shape: Option<f32>,
+) -> Vec<u8> {
     debug_assert_eq!(codes.len(), count * qs.len());
     let plane = |k: usize| &codes[k * count..(k + 1) * count];
+    // Mode 5 is a candidate only where every code of component 2 is its bucket's middle.
+    let shape = shape.filter(|&o| qs.len() == 3 && shaped(codes, count, qs, o));
     let cost = |k: usize, mode: u8| {
         let mut m = Meter::default();
-        put_component::<B, _>(&mut m, mode, k, qs, &plane);
+        put_component::<B, _>(&mut m, mode, k, qs, shape, &plane);
         m.0
     };
     let best: Vec<(f64, u8)> = (0..qs.len())
         .map(|k| {
-            [MODE_DIRECT, MODE_ACROSS, MODE_ALONG, MODE_RAW]
+            [MODE_DIRECT, MODE_ACROSS, MODE_ALONG, MODE_RAW, MODE_SHAPED]
                 .into_iter()
-                .filter(|&m| single_mode_allowed(m, k, B::CODING))
+                .filter(|&m| single_mode_allowed(m, k, qs.len(), B::CODING))
+                .filter(|&m| m != MODE_SHAPED || shape.is_some())
                 .map(|m| (cost(k, m), m))
                 .min_by(|a, b| a.0.total_cmp(&b.0))
                 .expect("candidates")
@@ -144,21 +180,51 @@ fn encode_by<B: Binarization>(codes: &[u32], count: usize, qs: &[Quantizer]) -> 
     if qs.len() == 2 && cost(0, MODE_MORTON) < best[0].0 + best[1].0 {
         modes = vec![MODE_MORTON; 2];
     }
-    encode_with_modes_by::<B>(codes, count, qs, &modes)
+    encode_with_modes_by::<B>(codes, count, qs, &modes, shape)
+}
+
+/// Whether component 2 of `codes` (three components) holds, for every Gaussian, the
+/// middle of the bucket that §5.4.5 gives it under `offset`: what mode 5 can code.
+pub fn shaped(codes: &[u32], count: usize, qs: &[Quantizer], offset: f32) -> bool {
+    if qs.len() != 3 || codes.len() != 3 * count || !offset.is_finite() {
+        return false;
+    }
+    let keeps = keep_bits(codes, count, qs, offset);
+    let bits = qs[2].bits;
+    (0..count).all(|i| {
+        codes[2 * count + i] <= qs[2].max_code()
+            && angle::coarse_code(codes[2 * count + i], keeps(i), bits).is_some()
+    })
+}
+
+/// The bits that Gaussian `i`'s angle keeps (§5.4.5), from its components 0 and 1 in
+/// `codes`, dequantized through tables where they pay.
+fn keep_bits<'a>(
+    codes: &'a [u32],
+    count: usize,
+    qs: &'a [Quantizer],
+    offset: f32,
+) -> impl Fn(usize) -> u8 + 'a {
+    let v0 = qs[0].lookup(count, move |c| qs[0].dequantize(c));
+    let v1 = qs[1].lookup(count, move |c| qs[1].dequantize(c));
+    let bits = qs[2].bits;
+    move |i| angle::shape_bits(v0.get(codes[i]), v1.get(codes[count + i]), offset, bits)
 }
 
 /// [`encode`] in the given modes (which must be valid for `qs` and `coding`, as
-/// [`check_modes`] says).
+/// [`check_modes`] says; mode 5 with `shape` such that [`shaped`] holds).
 pub fn encode_with_modes(
     codes: &[u32],
     count: usize,
     qs: &[Quantizer],
     modes: &[u8],
+    shape: Option<f32>,
     coding: Coding,
 ) -> Vec<u8> {
     match coding {
-        Coding::Method2 => encode_with_modes_by::<Method2>(codes, count, qs, modes),
-        Coding::Method3 => encode_with_modes_by::<Method3>(codes, count, qs, modes),
+        Coding::Method2 => encode_with_modes_by::<Method2>(codes, count, qs, modes, None),
+        Coding::Method3 => encode_with_modes_by::<Method3>(codes, count, qs, modes, None),
+        Coding::Method4 => encode_with_modes_by::<Method4>(codes, count, qs, modes, shape),
     }
 }
 
@@ -167,6 +233,7 @@ fn encode_with_modes_by<B: Binarization>(
     count: usize,
     qs: &[Quantizer],
     modes: &[u8],
+    shape: Option<f32>,
 ) -> Vec<u8> {
     let plane = |k: usize| &codes[k * count..(k + 1) * count];
     let mut e = Encoder::new();
@@ -174,9 +241,12 @@ fn encode_with_modes_by<B: Binarization>(
         if mode == MODE_MORTON && k == 1 {
             break;
         }
-        put_component::<B, _>(&mut e, mode, k, qs, &plane);
+        put_component::<B, _>(&mut e, mode, k, qs, shape, &plane);
     }
     let mut out = modes.to_vec();
+    if modes.contains(&MODE_SHAPED) {
+        out.extend(shape.expect("mode 5 with its offset").to_be_bytes());
+    }
     let (stream, raw) = e.finish_with_raw();
     if B::RAW {
         out.extend((raw.len() as u32).to_be_bytes());
@@ -192,6 +262,7 @@ fn put_component<'c, B: Binarization, S: Sink>(
     mode: u8,
     k: usize,
     qs: &[Quantizer],
+    shape: Option<f32>,
     plane: &impl Fn(usize) -> &'c [u32],
 ) {
     let q = &qs[k];
@@ -215,6 +286,15 @@ fn put_component<'c, B: Binarization, S: Sink>(
         MODE_RAW => {
             for &c in plane(k) {
                 s.raw(u64::from(c), u32::from(q.bits));
+            }
+        }
+        MODE_SHAPED => {
+            let count = plane(k).len();
+            let all = [plane(0), plane(1), plane(2)].concat();
+            let keeps = keep_bits(&all, count, qs, shape.expect("mode 5 with its offset"));
+            for (i, &c) in plane(k).iter().enumerate() {
+                let keep = keeps(i);
+                s.raw(u64::from(c >> (q.bits - keep)), u32::from(keep));
             }
         }
         MODE_ACROSS => {
@@ -241,14 +321,15 @@ fn out_of_range(what: &str, i: usize, k: usize) -> Error {
     )
 }
 
-/// Refuse modes that §5.4.3 and §5.4.4 do not allow in `coding`: an unknown byte,
+/// Refuse modes that §5.4.3–§5.4.5 do not allow in `coding`: an unknown byte,
 /// [`MODE_ACROSS`] on the first component, [`MODE_MORTON`] other than on both components
-/// of a pair, [`MODE_RAW`] in method 2.
+/// of a pair, [`MODE_RAW`] in method 2, [`MODE_SHAPED`] other than on component 2 of
+/// three in method 4.
 pub fn check_modes(modes: &[u8], coding: Coding) -> Result<()> {
     for (k, &m) in modes.iter().enumerate() {
         let ok = match m {
             MODE_MORTON => modes == [MODE_MORTON; 2],
-            _ => single_mode_allowed(m, k, coding),
+            _ => single_mode_allowed(m, k, modes.len(), coding),
         };
         if !ok {
             return Err(invalid(format!("coding mode {m} for component {k}")));
@@ -257,40 +338,61 @@ pub fn check_modes(modes: &[u8], coding: Coding) -> Result<()> {
     Ok(())
 }
 
-/// Whether component `k` may be coded alone in `mode` under `coding` (every mode but
-/// [`MODE_MORTON`], which takes a pair).
-fn single_mode_allowed(mode: u8, k: usize, coding: Coding) -> bool {
+/// Whether component `k` of `components` may be coded alone in `mode` under `coding`
+/// (every mode but [`MODE_MORTON`], which takes a pair).
+fn single_mode_allowed(mode: u8, k: usize, components: usize, coding: Coding) -> bool {
     match mode {
         MODE_DIRECT | MODE_ALONG => true,
         MODE_ACROSS => k > 0,
-        MODE_RAW => coding == Coding::Method3,
+        MODE_RAW => coding != Coding::Method2,
+        MODE_SHAPED => coding == Coding::Method4 && k == 2 && components == 3,
         _ => false,
     }
 }
 
-/// Decode a method-2 or method-3 payload's data into `count` planar codes. `data` is the
-/// mode bytes and the coded data (§5.4, §5.4.4); every byte of it must be used.
-pub fn decode(data: &[u8], count: usize, qs: &[Quantizer], coding: Coding) -> Result<Vec<u32>> {
+/// A decoded coded payload: the planar codes, and the offset of §5.4.5 where a component
+/// was shaped.
+pub struct Decoded {
+    pub codes: Vec<u32>,
+    pub shape: Option<f32>,
+}
+
+/// Decode a method-2, 3 or 4 payload's data into `count` planar codes. `data` is the
+/// mode bytes and the coded data (§5.4, §5.4.4, §5.4.5); every byte of it must be used.
+pub fn decode(data: &[u8], count: usize, qs: &[Quantizer], coding: Coding) -> Result<Decoded> {
     match coding {
         Coding::Method2 => decode_by::<Method2>(data, count, qs),
         Coding::Method3 => decode_by::<Method3>(data, count, qs),
+        Coding::Method4 => decode_by::<Method4>(data, count, qs),
     }
 }
 
-fn decode_by<B: Binarization>(data: &[u8], count: usize, qs: &[Quantizer]) -> Result<Vec<u32>> {
+fn decode_by<B: Binarization>(data: &[u8], count: usize, qs: &[Quantizer]) -> Result<Decoded> {
     let k_all = qs.len();
-    let head = k_all + if B::RAW { 4 } else { 0 };
-    if data.len() < head {
-        return Err(Error::new(
+    let short = |head: usize| {
+        Error::new(
             ErrorKind::Decompression,
             format!(
                 "{} bytes of coded data, fewer than the {head} in front of its stream",
                 data.len()
             ),
-        ));
+        )
+    };
+    if data.len() < k_all {
+        return Err(short(k_all));
     }
     let (modes, rest) = data.split_at(k_all);
     check_modes(modes, B::CODING)?;
+    let offset_len = if modes.contains(&MODE_SHAPED) { 4 } else { 0 };
+    let head = k_all + offset_len + if B::RAW { 4 } else { 0 };
+    if data.len() < head {
+        return Err(short(head));
+    }
+    let (offset, rest) = rest.split_at(offset_len);
+    let shape = (offset_len > 0).then(|| f32::from_be_bytes(offset.try_into().expect("4 bytes")));
+    if let Some(o) = shape.filter(|o| !o.is_finite()) {
+        return Err(invalid(format!("shape offset {o} is not finite")));
+    }
     let (stream, raw) = if B::RAW {
         let (len, rest) = rest.split_at(4);
         let len = u32::from_be_bytes(len.try_into().expect("4 bytes")) as usize;
@@ -351,6 +453,15 @@ fn decode_by<B: Binarization>(data: &[u8], count: usize, qs: &[Quantizer]) -> Re
                     *c = d.raw_code(q.bits)?;
                 }
             }
+            MODE_SHAPED => {
+                // Components 0 and 1 are decoded; the middle of a bucket of `keep`
+                // leading bits is a code up to `max` and no further.
+                let keeps = keep_bits(done, count, qs, shape.expect("read with mode 5"));
+                for (i, c) in rest[..count].iter_mut().enumerate() {
+                    let keep = keeps(i);
+                    *c = angle::full_code(d.raw_code(keep)?, keep, q.bits);
+                }
+            }
             mode => {
                 let mut ctx = Signed::<B::Residual>::default();
                 let prior = &done[(k.max(1) - 1) * count..];
@@ -376,7 +487,7 @@ fn decode_by<B: Binarization>(data: &[u8], count: usize, qs: &[Quantizer]) -> Re
         k += 1;
     }
     d.finish()?;
-    Ok(codes)
+    Ok(Decoded { codes, shape })
 }
 
 #[cfg(test)]
@@ -406,12 +517,22 @@ mod tests {
 
     /// A payload in `modes`, whichever the encoder would have chosen.
     fn forced(codes: &[u32], n: usize, qs: &[Quantizer], modes: &[u8], c: Coding) -> Vec<u8> {
-        encode_with_modes(codes, n, qs, modes, c)
+        encode_with_modes(codes, n, qs, modes, None, c)
+    }
+
+    /// [`super::encode`] of an attribute that is not shaped.
+    fn encode(codes: &[u32], n: usize, qs: &[Quantizer], c: Coding) -> Vec<u8> {
+        super::encode(codes, n, qs, None, c)
+    }
+
+    /// The codes of [`super::decode`].
+    fn decode(data: &[u8], n: usize, qs: &[Quantizer], c: Coding) -> Result<Vec<u32>> {
+        super::decode(data, n, qs, c).map(|d| d.codes)
     }
 
     #[test]
     fn every_mode_roundtrips() {
-        for c in [Coding::Method2, Coding::Method3] {
+        for c in [Coding::Method2, Coding::Method3, Coding::Method4] {
             let mut rng = test_rng(11);
             for &(n, bits) in &[
                 (0usize, 8u8),
@@ -439,7 +560,7 @@ mod tests {
                 );
                 // Forced modes, each of which the encoder may not have chosen.
                 let mut all: Vec<[u8; 3]> = vec![[0, 1, 0], [2, 2, 2], [0, 2, 1]];
-                if c == Coding::Method3 {
+                if c != Coding::Method2 {
                     all.extend([[4, 4, 4], [4, 1, 0], [2, 4, 1]]);
                 }
                 for modes in all {
@@ -479,7 +600,7 @@ mod tests {
 
     #[test]
     fn bad_modes_and_ranges_are_refused() {
-        for c in [Coding::Method2, Coding::Method3] {
+        for c in [Coding::Method2, Coding::Method3, Coding::Method4] {
             let qs = [q(4, 0.0, 1.0), q(4, 0.0, 1.0)];
             let codes = vec![1, 2, 3, 4];
             let good = encode(&codes, 2, &qs, c);
@@ -553,5 +674,125 @@ mod tests {
         let mut cut = big[..big.len() - n].to_vec();
         cut[1..5].copy_from_slice(&0u32.to_be_bytes());
         assert!(err(&cut, 2).contains("raw bits end"), "{}", err(&cut, 2));
+    }
+
+    /// Log-scales and angles as a fitted file's are, shaped by the encoder's rule.
+    fn shaped_attribute(n: usize, seed: u64) -> (crate::format::Attribute, Vec<[f32; 3]>) {
+        let mut rng = test_rng(seed);
+        let cov: Vec<[f32; 3]> = (0..n)
+            .map(|_| {
+                let a = -8.0 + 6.0 * rng();
+                let b = a - 3.0 * rng() * rng();
+                [a, b, (rng() - 0.5) * std::f32::consts::FRAC_PI_2]
+            })
+            .collect();
+        let colors: Vec<[f32; 3]> = (0..n).map(|_| [rng(), rng(), rng()]).collect();
+        (
+            crate::format::Attribute::shaped_angles(&cov, &colors, 6, 7),
+            cov,
+        )
+    }
+
+    #[test]
+    fn shaped_angles_roundtrip_in_fewer_bits() {
+        for n in [2usize, 3, 700] {
+            let (a, _) = shaped_attribute(n, 3);
+            let o = a.shape.expect("shaped");
+            assert!(shaped(&a.codes, n, &a.quantizers, o));
+            let four = super::encode(&a.codes, n, &a.quantizers, a.shape, Coding::Method4);
+            assert_eq!(four[2], MODE_SHAPED, "n {n}");
+            let got = super::decode(&four, n, &a.quantizers, Coding::Method4).unwrap();
+            assert_eq!(got.codes, a.codes);
+            assert_eq!(got.shape, Some(o));
+            let three = encode(&a.codes, n, &a.quantizers, Coding::Method3);
+            assert_eq!(
+                decode(&three, n, &a.quantizers, Coding::Method3).unwrap(),
+                a.codes
+            );
+            if n == 700 {
+                assert!(
+                    four.len() < three.len(),
+                    "{} against {}",
+                    four.len(),
+                    three.len()
+                );
+            }
+        }
+        // One Gaussian: a constant angle takes no bits, and nothing is shaped.
+        assert_eq!(shaped_attribute(1, 3).0.shape, None);
+        // A code off its bucket's middle cannot be shaped: mode 5 is no candidate.
+        let (mut a, _) = shaped_attribute(700, 4);
+        let o = a.shape.unwrap();
+        let depth = a.quantizers[2].bits;
+        let i = {
+            let keeps = keep_bits(&a.codes, 700, &a.quantizers, o);
+            (0..700)
+                .find(|&i| keeps(i) + 2 <= depth)
+                .expect("a coarse angle")
+        };
+        a.codes[1400 + i] ^= 1;
+        assert!(!shaped(&a.codes, 700, &a.quantizers, o));
+        let d = super::encode(&a.codes, 700, &a.quantizers, Some(o), Coding::Method4);
+        assert_ne!(d[2], MODE_SHAPED);
+        assert_eq!(
+            decode(&d, 700, &a.quantizers, Coding::Method4).unwrap(),
+            a.codes
+        );
+    }
+
+    #[test]
+    fn shaped_payloads_are_checked() {
+        let c = Coding::Method4;
+        let (a, _) = shaped_attribute(50, 9);
+        let qs = &a.quantizers;
+        let good = encode_with_modes(&a.codes, 50, qs, &[0, 0, MODE_SHAPED], a.shape, c);
+        assert_eq!(decode(&good, 50, qs, c).unwrap(), a.codes);
+        let err = |d: &[u8], qs: &[Quantizer], c: Coding| {
+            super::decode(d, 50, qs, c)
+                .err()
+                .expect("refused")
+                .to_string()
+        };
+        // Mode 5 on components 0 and 1, in method 3, on an attribute of two components.
+        for modes in [[MODE_SHAPED, 0, 0], [0, MODE_SHAPED, 0]] {
+            let mut bad = good.clone();
+            bad[..3].copy_from_slice(&modes);
+            assert!(
+                err(&bad, qs, c).contains("coding mode 5"),
+                "{}",
+                err(&bad, qs, c)
+            );
+        }
+        assert!(err(&good, qs, Coding::Method3).contains("coding mode 5"));
+        let pair = [qs[0], qs[1]];
+        let mut two = good[1..].to_vec();
+        two[..2].copy_from_slice(&[0, MODE_SHAPED]);
+        assert!(err(&two, &pair, c).contains("coding mode 5"));
+        // A mode above 5.
+        let mut six = good.clone();
+        six[2] = 6;
+        assert!(err(&six, qs, c).contains("coding mode 6"));
+        // An offset that is not finite.
+        for o in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+            let mut bad = good.clone();
+            bad[3..7].copy_from_slice(&o.to_be_bytes());
+            assert!(
+                err(&bad, qs, c).contains("not finite"),
+                "{}",
+                err(&bad, qs, c)
+            );
+        }
+        // Cut inside the offset or the raw length; raw bits that end too soon.
+        for cut in [4, 8, 10] {
+            assert!(
+                super::decode(&good[..cut], 50, qs, c).is_err(),
+                "cut at {cut}"
+            );
+        }
+        assert!(super::decode(&good, 51, qs, c).is_err());
+        // Another offset keeps other bits: the payload no longer decodes whole.
+        let mut moved = good.clone();
+        moved[3..7].copy_from_slice(&(a.shape.unwrap() + 3.0).to_be_bytes());
+        assert!(super::decode(&moved, 50, qs, c).is_err());
     }
 }

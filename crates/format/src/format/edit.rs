@@ -148,7 +148,7 @@ impl ChunkedFile {
                 }
                 // `GHDR` is kept byte for byte (§7.4), so the colours take only a method
                 // its minor allows: a 1.0 file stays readable by 1.0 decoders, a 1.1 file
-                // may use method 2, a 1.6 file method 3.
+                // may use method 2, a 1.6 file (or 1.7: colours are never shaped) method 3.
                 ChunkType::COLORS => out.push(RawChunk {
                     ty: c.ty,
                     data: colors

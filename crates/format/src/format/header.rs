@@ -14,6 +14,8 @@ pub const VERSION_MINOR: u8 = 0;
 pub const VERSION_MINOR_CODED: u8 = 1;
 /// Minor version of a file with a payload of compression method 3 (§5.4.4).
 pub const VERSION_MINOR_CODED_RAW: u8 = 6;
+/// Minor version of a file with a payload of compression method 4 (§5.4.5).
+pub const VERSION_MINOR_SHAPED: u8 = 7;
 /// Exact payload length of `GHDR`.
 pub const HEADER_LEN: usize = 18;
 

@@ -3,6 +3,7 @@
 //! `format-spec.md` at the repository root is the normative description of every byte
 //! handled here; section numbers in comments refer to it.
 
+pub mod angle;
 mod chunk;
 mod chunk_type;
 mod coder;
@@ -30,14 +31,14 @@ pub use enhancer::{
 pub use error::{Error, ErrorKind, Result};
 pub use header::{
     ColorSpace, Header, FLAG_IMPORTANCE_ORDERED, VERSION_MAJOR, VERSION_MINOR, VERSION_MINOR_CODED,
-    VERSION_MINOR_CODED_RAW,
+    VERSION_MINOR_CODED_RAW, VERSION_MINOR_SHAPED,
 };
 pub use limits::{Limits, DEFAULT_RENDER_WORK};
 pub use meta::CompressionMeta;
 pub use quant::{Quantizer, MAX_BITS};
 pub use reader::{read_file, Decoder, GsiFile};
 pub use records::{
-    minor_for_method, Attribute, BitDepths, Records, METHOD_CODED, METHOD_CODED_RAW,
+    minor_for_method, Attribute, BitDepths, Records, METHOD_CODED, METHOD_CODED_RAW, METHOD_SHAPED,
 };
 pub use settings::EncoderSettings;
 pub use writer::{to_bytes, write_file, WriteOptions};
@@ -72,6 +73,7 @@ pub mod tests_support {
             position: 8,
             covariance: 8,
             angle: 8,
+            angle_by_shape: false,
             color: 8,
             opacity: 8,
         };

@@ -203,6 +203,7 @@ mod tests {
         let a = Attribute {
             quantizers: vec![q],
             codes: codes.clone(),
+            shape: None,
         };
         let got: Vec<[f32; 1]> = a.values();
         for (v, &c) in got.iter().zip(&codes) {

@@ -1,9 +1,10 @@
 //! Records: the attributes exactly as stored (integer codes plus quantizers), and their
 //! lossless link to the float [`Scene`](crate::model::Scene).
 
+use super::angle;
 use super::context::{self, Coding};
 use super::error::{invalid, Error, ErrorKind, Result};
-use super::header::{Header, VERSION_MINOR_CODED, VERSION_MINOR_CODED_RAW};
+use super::header::{Header, VERSION_MINOR_CODED, VERSION_MINOR_CODED_RAW, VERSION_MINOR_SHAPED};
 use super::limits::{AllocBudget, Limits};
 use super::quant::{self, Quantizer};
 use crate::model::{CovParam, GaussianSet, Scene, WeightRule};
@@ -17,16 +18,20 @@ pub const METHOD_CODED: u8 = 2;
 /// Method 2's predictions with the bits that contexts do not help with raw, decoded with
 /// fewer decisions (spec §5.4.4; version 1.6). What the encoder writes.
 pub const METHOD_CODED_RAW: u8 = 3;
+/// Method 3 and angles at the precision of their shape (spec §5.4.5; version 1.7): what
+/// the encoder writes where it shapes the angles.
+pub const METHOD_SHAPED: u8 = 4;
 
 /// The coded methods: each coding, its method byte, and the least minor version of a
 /// file that holds it (§2.5). Newest last.
-const CODED: [(Coding, u8, u8); 2] = [
+const CODED: [(Coding, u8, u8); 3] = [
     (Coding::Method2, METHOD_CODED, VERSION_MINOR_CODED),
     (Coding::Method3, METHOD_CODED_RAW, VERSION_MINOR_CODED_RAW),
+    (Coding::Method4, METHOD_SHAPED, VERSION_MINOR_SHAPED),
 ];
 
-/// The newest coded method that a file of minor version `minor` may hold: method 3 from
-/// 1.6, 2 from 1.1, none before. (A file of 1.6 may hold method 2 too.)
+/// The newest coded method that a file of minor version `minor` may hold: method 4 from
+/// 1.7, 3 from 1.6, 2 from 1.1, none before. (A file of 1.6 may hold method 2 too.)
 pub fn newest_coding(minor: u8) -> Option<Coding> {
     CODED.iter().rev().find(|c| minor >= c.2).map(|c| c.0)
 }
@@ -62,6 +67,10 @@ pub struct Attribute {
     pub quantizers: Vec<Quantizer>,
     /// Planar codes: component 0 of every Gaussian, then component 1, …
     pub codes: Vec<u32>,
+    /// The offset of §5.4.5 where component 2 holds angles at the precision of their
+    /// shape (each code the middle of its bucket, [`crate::format::angle`]), so that method
+    /// 4 may code them in mode 5; `None` for every other attribute.
+    pub shape: Option<f32>,
 }
 
 impl Attribute {
@@ -82,6 +91,7 @@ impl Attribute {
         Attribute {
             quantizers: quantizers.to_vec(),
             codes,
+            shape: None,
         }
     }
 
@@ -89,6 +99,23 @@ impl Attribute {
     pub fn fit<const C: usize>(values: &[[f32; C]], bits: [u8; C]) -> Attribute {
         let qs = std::array::from_fn(|c| Quantizer::fit(bits[c], values.iter().map(|v| v[c])));
         Attribute::quantize(values, qs)
+    }
+
+    /// A `log-scale-rotation` covariance with its angles shaped (§5.4.5,
+    /// [`angle::shape`]): scales at `scale_bits`, the angle stored [`angle::EXTRA_BITS`]
+    /// above `angle_bits`, at the noise of `angle_bits` uniform bits.
+    pub fn shaped_angles(
+        cov: &[[f32; 3]],
+        colors: &[[f32; 3]],
+        scale_bits: u8,
+        angle_bits: u8,
+    ) -> Attribute {
+        let depth = angle_bits
+            .saturating_add(angle::EXTRA_BITS)
+            .min(quant::MAX_BITS);
+        let mut a = Attribute::fit(cov, [scale_bits, scale_bits, depth]);
+        a.shape = angle::shape(cov, colors, &a.quantizers, &mut a.codes, angle_bits);
+        a
     }
 
     /// Dequantize into records of `C` components (`C` must equal `components()`).
@@ -119,29 +146,42 @@ impl Attribute {
         self.to_payload_with(zstd_level, false)
     }
 
-    /// A payload of `method` (2 or 3) in the given modes, for the spec's worked examples
+    /// A payload of `method` (2, 3 or 4) in the given modes, for the spec's worked examples
     /// and tests; `None` where the method is not a coded one or the modes are not valid
-    /// for this attribute.
+    /// for this attribute (mode 5 where its angles are not shaped).
     #[doc(hidden)]
     pub fn to_coded_payload(&self, modes: &[u8], method: u8) -> Option<Vec<u8>> {
         let c = coding(method)?;
-        let ok = modes.len() == self.components() && context::check_modes(modes, c).is_ok();
+        let ok = modes.len() == self.components()
+            && context::check_modes(modes, c).is_ok()
+            && (!modes.contains(&context::MODE_SHAPED)
+                || self.shape.is_some_and(|o| {
+                    context::shaped(&self.codes, self.count(), &self.quantizers, o)
+                }));
         ok.then(|| {
-            let data =
-                context::encode_with_modes(&self.codes, self.count(), &self.quantizers, modes, c);
+            let data = context::encode_with_modes(
+                &self.codes,
+                self.count(),
+                &self.quantizers,
+                modes,
+                self.shape,
+                c,
+            );
             self.payload(method, &data)
         })
     }
 
     /// [`to_payload`](Self::to_payload), and with `coded` also method 3 (§5.4.4), of the
     /// three whichever is smallest.
+    /// A shaped attribute ([`Attribute::shape`]) is tried in method 4 too.
     pub fn to_payload_with(&self, zstd_level: i32, coded: bool) -> Result<Vec<u8>> {
-        self.to_payload_coded(zstd_level, coded.then_some(Coding::Method3))
+        self.to_payload_coded(zstd_level, coded.then_some(Coding::Method4))
     }
 
     /// [`to_payload`](Self::to_payload), and with `coded` also that coded method, of the
     /// three whichever is smallest: for a file whose minor version says which methods it
-    /// may hold ([`newest_coding`]).
+    /// may hold ([`newest_coding`]). Method 4 is tried only for a shaped attribute, and
+    /// method 3 beside it, so that only a payload with shaped angles needs version 1.7.
     pub fn to_payload_coded(&self, zstd_level: i32, coded: Option<Coding>) -> Result<Vec<u8>> {
         let packed = quant::pack(&self.codes, self.count(), &self.quantizers);
         let zipped = zstd::bulk::compress(&packed, zstd_level)?;
@@ -150,8 +190,13 @@ impl Attribute {
         } else {
             (METHOD_STORED, packed)
         };
-        if let Some(c) = coded {
-            let d = context::encode(&self.codes, self.count(), &self.quantizers, c);
+        let shaped = self.shape.is_some() && coded == Some(Coding::Method4);
+        let coded = match coded {
+            Some(Coding::Method4) => Some(Coding::Method3),
+            c => c,
+        };
+        for c in coded.into_iter().chain(shaped.then_some(Coding::Method4)) {
+            let d = context::encode(&self.codes, self.count(), &self.quantizers, self.shape, c);
             if d.len() < data.len() {
                 (method, data) = (method_of(c), d);
             }
@@ -268,20 +313,25 @@ impl Attribute {
                 }
                 &zipped
             }
-            METHOD_CODED | METHOD_CODED_RAW => &[],
+            METHOD_CODED | METHOD_CODED_RAW | METHOD_SHAPED => &[],
             m => return Err(invalid(format!("compression method {m}"))),
         };
         let ncodes = u64::from(count) * components as u64;
         budget.reserve(ncodes * 4, "attribute codes")?;
-        let codes = if let Some(c) = coding(method) {
-            context::decode(data, count as usize, &quantizers, c)?
+        let (codes, shape) = if let Some(c) = coding(method) {
+            let d = context::decode(data, count as usize, &quantizers, c)?;
+            (d.codes, d.shape)
         } else {
-            quant::unpack(packed, count as usize, &quantizers)
+            (quant::unpack(packed, count as usize, &quantizers), None)
         };
         if method == METHOD_ZSTD {
             budget.release(expected);
         }
-        Ok(Attribute { quantizers, codes })
+        Ok(Attribute {
+            quantizers,
+            codes,
+            shape,
+        })
     }
 }
 
@@ -313,6 +363,10 @@ pub struct BitDepths {
     /// fewer than the scales already halves the step a free angle had. A `cholesky`
     /// covariance spends `covariance` on all three components.
     pub angle: u8,
+    /// Angles at the precision of their Gaussian's shape (spec §5.4.5, method 4): the
+    /// noise of `angle` uniform bits, in fewer ([`Attribute::shaped_angles`]).
+    /// For `log-scale-rotation` only.
+    pub angle_by_shape: bool,
     pub color: u8,
     pub opacity: u8,
 }
@@ -335,6 +389,7 @@ impl Default for BitDepths {
             position: 16,
             covariance: 12,
             angle: 12,
+            angle_by_shape: false,
             color: 8,
             opacity: 8,
         }
@@ -364,7 +419,11 @@ impl Records {
                 scene.cov_param,
             ),
             positions: Attribute::fit(&g.positions, [bits.position; 2]),
-            covariance: Attribute::fit(&g.cov, bits.of_covariance(scene.cov_param)),
+            covariance: if bits.angle_by_shape && scene.cov_param == CovParam::LogScaleRotation {
+                Attribute::shaped_angles(&g.cov, &g.colors, bits.covariance, bits.angle)
+            } else {
+                Attribute::fit(&g.cov, bits.of_covariance(scene.cov_param))
+            },
             colors: Attribute::fit(&g.colors, [bits.color; 3]),
             opacity,
             tone: scene.tone.clone(),

@@ -51,7 +51,8 @@ pub struct EncoderSettings {
     pub seed: Option<u64>,
     pub budget: Option<BudgetKind>,
     pub loss: Option<LossKind>,
-    /// `bits=P/C/K/O/A`: position, covariance, colour, opacity and angle depths.
+    /// `bits=P/C/K/O/A`: position, covariance, colour, opacity and angle depths (for
+    /// shaped angles, spec §5.4.5, the uniform depth whose noise they match).
     pub bits: Option<[u8; 5]>,
     /// `coarse=F/X`: the first fraction `X` of the steps fitted `F` times smaller.
     pub coarse: Option<(u32, f32)>,

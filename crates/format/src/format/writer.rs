@@ -17,9 +17,10 @@ pub struct WriteOptions {
     pub settings: Option<String>,
     /// Further ancillary chunks, written in order after the attributes.
     pub ancillary: Vec<RawChunk>,
-    /// Also consider compression method 3 (§5.4.4) for each attribute, keeping the
-    /// smallest payload; a file that uses it is written as version 1.6, which earlier
-    /// decoders refuse ("compression method 3"). Off by default, so that a plain write
+    /// Also consider compression method 3 (§5.4.4) for each attribute, and method 4
+    /// (§5.4.5) for one whose angles are shaped, keeping the smallest payload; a file that
+    /// uses method 3 is written as version 1.6 and one that uses method 4 as 1.7, which
+    /// earlier decoders refuse ("compression method 3", "… 4"). Off by default, so that a plain write
     /// stays readable by every 1.0 decoder; the encoder turns it on. (Method 2, for
     /// decoders of 1.1–1.5, is written only where a file already of such a minor is
     /// rewritten for stage 2, which keeps its `GHDR`.)
