@@ -201,9 +201,25 @@ pub fn shape(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
+    use crate::format::coder::tests::test_rng;
     use crate::format::Attribute;
+
+    /// `n` log-scale pairs, angles within a quarter turn and colours, spread as a fitted
+    /// file's are (sizes over six nats, elongations mostly under 3).
+    pub(crate) fn fitted_like(n: usize, seed: u64) -> (Vec<[f32; 3]>, Vec<[f32; 3]>) {
+        let mut rng = test_rng(seed);
+        let cov = (0..n)
+            .map(|_| {
+                let a = -9.0 + 6.0 * rng();
+                let b = a - 3.0 * rng() * rng();
+                [a, b, (rng() - 0.5) * std::f32::consts::FRAC_PI_2]
+            })
+            .collect();
+        let colors = (0..n).map(|_| [rng(), rng(), rng()]).collect();
+        (cov, colors)
+    }
 
     #[test]
     fn thresholds_are_where_r_minus_one_over_r_doubles() {
@@ -231,23 +247,8 @@ mod tests {
 
     #[test]
     fn shaped_angles_add_the_noise_of_the_uniform_depth_in_fewer_bits() {
-        // Scales and angles spread as a fitted file's are; a deterministic generator.
-        let mut state = 0x2545_f491_4f6c_dd1du64;
-        let mut rng = || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 40) as f32 / (1u64 << 24) as f32
-        };
         let n = 6000;
-        let cov: Vec<[f32; 3]> = (0..n)
-            .map(|_| {
-                let a = -9.0 + 6.0 * rng();
-                let b = a - 3.0 * rng() * rng();
-                [a, b, (rng() - 0.5) * std::f32::consts::FRAC_PI_2]
-            })
-            .collect();
-        let colors: Vec<[f32; 3]> = (0..n).map(|_| [rng(), rng(), rng()]).collect();
+        let (cov, colors) = fitted_like(n, 1);
         let shaped = Attribute::shaped_angles(&cov, &colors, 6, 7);
         let uniform = Attribute::fit(&cov, [6, 6, 7]);
         assert_eq!(shaped.quantizers[2].bits, 7 + EXTRA_BITS);

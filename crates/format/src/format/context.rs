@@ -91,11 +91,11 @@ impl Binarization for Method3 {
 struct Method4;
 
 impl Binarization for Method4 {
-    type Residual = SplitMagnitude<false>;
-    type Step = SplitMagnitude<true>;
+    type Residual = <Method3 as Binarization>::Residual;
+    type Step = <Method3 as Binarization>::Step;
     const CODING: Coding = Coding::Method4;
     fn tree(bits: u8) -> Tree {
-        Tree::split(bits)
+        Method3::tree(bits)
     }
 }
 
@@ -678,15 +678,7 @@ mod tests {
 
     /// Log-scales and angles as a fitted file's are, shaped by the encoder's rule.
     fn shaped_attribute(n: usize, seed: u64) -> (crate::format::Attribute, Vec<[f32; 3]>) {
-        let mut rng = test_rng(seed);
-        let cov: Vec<[f32; 3]> = (0..n)
-            .map(|_| {
-                let a = -8.0 + 6.0 * rng();
-                let b = a - 3.0 * rng() * rng();
-                [a, b, (rng() - 0.5) * std::f32::consts::FRAC_PI_2]
-            })
-            .collect();
-        let colors: Vec<[f32; 3]> = (0..n).map(|_| [rng(), rng(), rng()]).collect();
+        let (cov, colors) = angle::tests::fitted_like(n, seed);
         (
             crate::format::Attribute::shaped_angles(&cov, &colors, 6, 7),
             cov,
