@@ -237,6 +237,11 @@ mod corpus {
             ),
             expect: None,
         });
+        out.push(CorpusFile {
+            name: "coded4-sum-lsr-64-edges.gsi".into(),
+            bytes: coded(&shaped_edges(), [&[3, 3], &[0, 0, 5], &[0, 1, 1], &[]], M4),
+            expect: None,
+        });
         let wide = BitDepths {
             position: 24,
             covariance: 24,
@@ -1063,6 +1068,42 @@ mod corpus {
         files.push((K::InvalidValue, "coded3-mode-5", {
             edit(ChunkType::COVARIANCE, &|d| d[35] = 5)
         }));
+    }
+
+    /// The edges of §5.4.5's rule, which fitted files rarely reach: 64 Gaussians with every
+    /// pair of 3-bit log-scale codes over [−7, 7] (values −7 + 2q, so `e` from 0 to 14 and
+    /// `p0 + p1` from −14 to 14), a 10-bit angle and o = −2^−20. A sum just below an integer
+    /// (`floor`, not truncation: `e` = 14 at `p0 + p1` = 0 keeps 9 bits, not 10), round
+    /// Gaussians whose `floor(...)` is 10 (they keep nothing, not 3), `keep` from 0 to 10.
+    fn shaped_edges() -> Records {
+        use format::angle::{full_code, shape_bits};
+        let mut r = random(20, SceneSpec::new(64, 48, 64, Blend::Sum));
+        let scale = format::Quantizer {
+            bits: 3,
+            min: -7.0,
+            max: 7.0,
+        };
+        let angle = format::Quantizer {
+            bits: 10,
+            min: -std::f32::consts::FRAC_PI_4,
+            max: std::f32::consts::FRAC_PI_4,
+        };
+        let offset = -1.0 / (1u32 << 20) as f32;
+        let n = 64;
+        let mut codes: Vec<u32> = (0..n).map(|i| i / 8).chain((0..n).map(|i| i % 8)).collect();
+        for i in 0..n as usize {
+            let (p0, p1) = (scale.dequantize(codes[i]), scale.dequantize(codes[64 + i]));
+            let keep = shape_bits(p0, p1, offset, angle.bits);
+            let coarse = (i as u32 * 37) & ((1u32 << keep) - 1);
+            codes.push(full_code(coarse, keep, angle.bits));
+        }
+        r.header.cov_param = CovParam::LogScaleRotation;
+        r.covariance = format::Attribute {
+            quantizers: vec![scale, scale, angle],
+            codes,
+            shape: Some(offset),
+        };
+        r
     }
 
     /// Malformed payloads of method 4 (§5.4.5), each in a file that is otherwise shaped and

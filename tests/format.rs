@@ -92,6 +92,43 @@ fn spec_method_2_3_and_4_examples_decode() {
     }
 }
 
+/// The corpus file of §5.4.5's edges holds what fitted files rarely reach: a sum just below
+/// an integer (`floor`, not truncation), round Gaussians whose `floor(...)` would keep
+/// bits (they keep none), and the depth reached.
+#[test]
+fn spec_shaped_angles_at_their_edges() {
+    use gsi::format::angle::{coarse_code, shape_bits};
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/corpus/valid/coded4-sum-lsr-64-edges.gsi"
+    );
+    let file = format::read_file(&std::fs::read(path).unwrap()[..], Limits::default()).unwrap();
+    let cov = &file.records.covariance;
+    let offset = cov.shape.expect("method 4, mode 5");
+    assert_eq!(offset, -1.0 / (1u32 << 20) as f32);
+    let [s, _, a] = [cov.quantizers[0], cov.quantizers[1], cov.quantizers[2]];
+    let keep = |q0: u32, q1: u32| shape_bits(s.dequantize(q0), s.dequantize(q1), offset, a.bits);
+    assert_eq!(
+        (a.bits, keep(0, 7), keep(7, 0)),
+        (10, 9, 9),
+        "floor below 0, not 0"
+    );
+    assert_eq!(
+        (keep(7, 7), keep(6, 6)),
+        (0, 0),
+        "round Gaussians keep nothing"
+    );
+    assert_eq!(keep(3, 4), 1);
+    assert_eq!(keep(1, 7), 10);
+    for i in 0..64usize {
+        let k = keep(cov.codes[i], cov.codes[64 + i]);
+        assert!(
+            coarse_code(cov.codes[128 + i], k, a.bits).is_some(),
+            "Gaussian {i}"
+        );
+    }
+}
+
 fn sample_files() -> Vec<(Records, Vec<u8>)> {
     let mut out = Vec::new();
     for (seed, blend, cov, n) in [
