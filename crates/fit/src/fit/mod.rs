@@ -273,8 +273,9 @@ pub struct Encoded {
 ///   [`gsi_format::format::angle`]), at the noise of a uniform 8-bit angle, which takes
 ///   about the bits that 7 uniform bits took. Of the noise of 6, 7, 8 and 9 uniform bits,
 ///   on photos12 and eval15's normal-light images at 1 bpp against 7 uniform bits:
-///   −0.30, +0.12, +0.18 and about −0.01 dB (the buildings −0.96, −0.03, +0.27, +0.12);
-///   at 0.5 bpp 7 and 8 tie (+0.05, +0.06). `alpha` mode keeps 7 uniform bits.
+///   −0.29, +0.12, +0.18 and +0.02 dB (the last on 15 of the 27 images; the buildings
+///   −0.96, −0.03, +0.27, +0.12); at 0.5 bpp 7 and 8 tie (+0.05, +0.07). `alpha` mode
+///   keeps 7 uniform bits.
 pub fn default_bits(width: u32, height: u32, blend: Blend) -> BitDepths {
     let side = width.max(height).max(2);
     let position = (32 - (side - 1).leading_zeros() + 2).clamp(6, 20) as u8;

@@ -14,6 +14,7 @@
 //! a different count would misread every code after it.
 
 use super::quant::Quantizer;
+use crate::contract::{COLOR_MAX, LN_SIGMA_MAX, LN_SIGMA_MIN};
 
 /// `asinh(2^(j − 7))` for `j = 0..=16`: where `2·sinh(e) = r − 1/r` reaches `2^(j − 6)`.
 /// [`shape_bits`] counts the thresholds at or below `e = |ln r|` (spec §5.4.5 lists them).
@@ -144,7 +145,9 @@ pub fn shape(
         .map(|i| (v0.get(codes[i]), v1.get(codes[n + i])))
         .collect();
     // Weights relative to the largest size, within §6.1's clamps: finite for any record.
-    let log_size = |(p0, p1): (f32, f32)| f64::from(p0.clamp(-30.0, 3.0) + p1.clamp(-30.0, 3.0));
+    let log_size = |(p0, p1): (f32, f32)| {
+        f64::from(p0.clamp(LN_SIGMA_MIN, LN_SIGMA_MAX) + p1.clamp(LN_SIGMA_MIN, LN_SIGMA_MAX))
+    };
     let top = p
         .iter()
         .map(|&x| log_size(x))
@@ -156,7 +159,7 @@ pub fn shape(
             let k = 2.0 * f64::from((p0 - p1).abs().min(33.0)).sinh();
             let c2: f64 = c
                 .iter()
-                .map(|&x| f64::from(x.clamp(-64.0, 64.0)).powi(2))
+                .map(|&x| f64::from(x.clamp(-COLOR_MAX, COLOR_MAX)).powi(2))
                 .sum();
             let w = (log_size((p0, p1)) - top).exp() * k * k * c2;
             // A colour that is not a number weighs nothing rather than everything.
@@ -189,13 +192,8 @@ pub fn shape(
             lo = mid;
         }
     }
-    let (min, max) = (f64::from(qs[2].min), f64::from(qs[2].max));
-    let top_code = f64::from(qs[2].max_code());
     for (i, (s, c)) in shapes.iter().zip(cov).enumerate() {
-        let keep = s.bits(hi, depth);
-        let x = ((f64::from(c[2]) - min) / (max - min) * top_code).clamp(0.0, top_code);
-        let x = if x.is_nan() { 0.0 } else { x };
-        codes[2 * n + i] = round_to_bucket(x, keep, depth);
+        codes[2 * n + i] = round_to_bucket(qs[2].position(c[2]), s.bits(hi, depth), depth);
     }
     Some(hi)
 }

@@ -189,7 +189,7 @@ pub fn shaped(codes: &[u32], count: usize, qs: &[Quantizer], offset: f32) -> boo
     if qs.len() != 3 || codes.len() != 3 * count || !offset.is_finite() {
         return false;
     }
-    let keeps = keep_bits(codes, count, qs, offset);
+    let keeps = keep_bits(&codes[..count], &codes[count..2 * count], qs, offset);
     let bits = qs[2].bits;
     (0..count).all(|i| {
         codes[2 * count + i] <= qs[2].max_code()
@@ -197,18 +197,19 @@ pub fn shaped(codes: &[u32], count: usize, qs: &[Quantizer], offset: f32) -> boo
     })
 }
 
-/// The bits that Gaussian `i`'s angle keeps (§5.4.5), from its components 0 and 1 in
-/// `codes`, dequantized through tables where they pay.
+/// The bits that Gaussian `i`'s angle keeps (§5.4.5), from its codes of components 0
+/// and 1 (`first`, `second`), dequantized through tables where they pay.
 fn keep_bits<'a>(
-    codes: &'a [u32],
-    count: usize,
+    first: &'a [u32],
+    second: &'a [u32],
     qs: &'a [Quantizer],
     offset: f32,
 ) -> impl Fn(usize) -> u8 + 'a {
+    let count = first.len();
     let v0 = qs[0].lookup(count, move |c| qs[0].dequantize(c));
     let v1 = qs[1].lookup(count, move |c| qs[1].dequantize(c));
     let bits = qs[2].bits;
-    move |i| angle::shape_bits(v0.get(codes[i]), v1.get(codes[count + i]), offset, bits)
+    move |i| angle::shape_bits(v0.get(first[i]), v1.get(second[i]), offset, bits)
 }
 
 /// [`encode`] in the given modes (which must be valid for `qs` and `coding`, as
@@ -289,9 +290,12 @@ fn put_component<'c, B: Binarization, S: Sink>(
             }
         }
         MODE_SHAPED => {
-            let count = plane(k).len();
-            let all = [plane(0), plane(1), plane(2)].concat();
-            let keeps = keep_bits(&all, count, qs, shape.expect("mode 5 with its offset"));
+            let keeps = keep_bits(
+                plane(0),
+                plane(1),
+                qs,
+                shape.expect("mode 5 with its offset"),
+            );
             for (i, &c) in plane(k).iter().enumerate() {
                 let keep = keeps(i);
                 s.raw(u64::from(c >> (q.bits - keep)), u32::from(keep));
@@ -456,7 +460,8 @@ fn decode_by<B: Binarization>(data: &[u8], count: usize, qs: &[Quantizer]) -> Re
             MODE_SHAPED => {
                 // Components 0 and 1 are decoded; the middle of a bucket of `keep`
                 // leading bits is a code up to `max` and no further.
-                let keeps = keep_bits(done, count, qs, shape.expect("read with mode 5"));
+                let (first, second) = done.split_at(count);
+                let keeps = keep_bits(first, second, qs, shape.expect("read with mode 5"));
                 for (i, c) in rest[..count].iter_mut().enumerate() {
                     let keep = keeps(i);
                     *c = angle::full_code(d.raw_code(keep)?, keep, q.bits);
@@ -717,7 +722,7 @@ mod tests {
         let o = a.shape.unwrap();
         let depth = a.quantizers[2].bits;
         let i = {
-            let keeps = keep_bits(&a.codes, 700, &a.quantizers, o);
+            let keeps = keep_bits(&a.codes[..700], &a.codes[700..1400], &a.quantizers, o);
             (0..700)
                 .find(|&i| keeps(i) + 2 <= depth)
                 .expect("a coarse angle")

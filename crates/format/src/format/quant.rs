@@ -114,11 +114,18 @@ impl Quantizer {
     /// Nearest code for `x`; values outside the range clamp to its ends, NaN maps to 0.
     #[inline]
     pub fn quantize(&self, x: f32) -> u32 {
+        self.position(x).round() as u32
+    }
+
+    /// Where `x` falls on the codes, unrounded: in `[0, max_code]`, values outside the
+    /// range at its ends, NaN (and a range of one value) at 0.
+    #[inline]
+    pub fn position(&self, x: f32) -> f64 {
         if self.bits == 0 || self.max <= self.min || x.is_nan() {
-            return 0;
+            return 0.0;
         }
         let t = (f64::from(x) - f64::from(self.min)) / (f64::from(self.max) - f64::from(self.min));
-        (t.clamp(0.0, 1.0) * f64::from(self.max_code())).round() as u32
+        t.clamp(0.0, 1.0) * f64::from(self.max_code())
     }
 }
 
