@@ -2,7 +2,8 @@
 //! with method 3 where it is smaller (`--coded`, the encoder's choice), keeping every
 //! code, and print the bits per Gaussian of each attribute before and after. The codes,
 //! hence the pixels, do not change: only their bytes do. A `sum` file is put in curve order
-//! for `--coded`, as the encoder writes it.
+//! for `--coded`, as the encoder writes it. Colours stored by footprint (method 5) have no
+//! other coding and keep it either way.
 //!
 //! `cargo run --release --example recode -- IN.gsi OUT.gsi --packed|--coded`
 
@@ -14,7 +15,8 @@ fn bits(records: &Records, coded: bool) -> Vec<f64> {
         .into_iter()
         .chain(records.opacity.as_ref())
         .map(|a| {
-            a.to_payload_with(19, coded)
+            records
+                .attribute_payload(a, 19, coded)
                 .expect("in-memory payload")
                 .len() as f64
                 * 8.0

@@ -28,12 +28,11 @@ struct Stage2 {
 
 fn stage2(f: &GsiFile) -> Stage2 {
     let find = |ty| f.ancillary.iter().find(|c| c.ty == ty);
-    let header = &f.records.header;
     Stage2 {
         enhancer: find(ChunkType::ENHANCER)
             .map(|c| EnhancerRecord::parse(&c.data, &Limits::default()).map_err(|e| e.to_string())),
         revertible: find(ChunkType::ORIGINAL_COLORS).is_some_and(|c| {
-            OriginalColors::parse(&c.data).is_ok_and(|o| o.validate(header).is_ok())
+            OriginalColors::parse(&c.data).is_ok_and(|o| o.validate(&f.records).is_ok())
         }),
     }
 }
@@ -153,6 +152,9 @@ pub fn to_json(f: &GsiFile) -> serde_json::Value {
             "GCOL": quantizers(&r.colors),
             "GOPA": r.opacity.as_ref().map(quantizers),
         },
+        // Colours stored by footprint (spec §5.4.6): the quantizers above span the colours
+        // times `2^k`; this is the base of their classes.
+        "color_footprint_base": r.colors.footprint,
         "chunks": f.chunks.iter().map(|c| json!({
             "type": c.ty.to_string(),
             "offset": c.offset,

@@ -48,18 +48,31 @@ mod corpus {
     /// needs and with no `gCRM`: each mode meets the decoder whether or not the encoder
     /// would have chosen it.
     fn coded(records: &Records, modes: [&[u8]; 4], method: u8) -> Vec<u8> {
+        coded_each(records, modes.map(|m| (m, method)))
+    }
+
+    /// [`coded`] with each attribute in a method of its own (colours by footprint in
+    /// method 5, §5.4.6, read with the covariance's sizes), as the least minor version
+    /// that all of them need.
+    fn coded_each(records: &Records, each: [(&[u8], u8); 4]) -> Vec<u8> {
         let mut header = records.header;
-        header.version_minor = format::minor_for_method(method);
+        header.version_minor = each
+            .iter()
+            .map(|&(_, m)| format::minor_for_method(m))
+            .max()
+            .unwrap_or(0);
         let attributes = [
-            (ChunkType::POSITIONS, Some(&records.positions), modes[0]),
-            (ChunkType::COVARIANCE, Some(&records.covariance), modes[1]),
-            (ChunkType::COLORS, Some(&records.colors), modes[2]),
-            (ChunkType::OPACITY, records.opacity.as_ref(), modes[3]),
+            (ChunkType::POSITIONS, Some(&records.positions), each[0]),
+            (ChunkType::COVARIANCE, Some(&records.covariance), each[1]),
+            (ChunkType::COLORS, Some(&records.colors), each[2]),
+            (ChunkType::OPACITY, records.opacity.as_ref(), each[3]),
         ];
+        let sizes = records.footprint_sizes();
         let mut chunks = vec![(ChunkType::HEADER, header.to_bytes().to_vec())];
-        for (ty, a, m) in attributes {
+        for (ty, a, (m, method)) in attributes {
             if let Some(a) = a {
-                chunks.push((ty, a.to_coded_payload(m, method).expect("valid modes")));
+                let payload = a.to_coded_payload(m, method, sizes.as_deref());
+                chunks.push((ty, payload.expect("valid modes")));
             }
         }
         chunks.push((ChunkType::END, Vec::new()));
@@ -86,12 +99,51 @@ mod corpus {
             covariance: 6,
             angle: 7,
             angle_by_shape: true,
+            color_by_footprint: false,
             color: 8,
             opacity: 6,
         };
         let mut r = Records::from_scene(&scene, bits);
         assert!(r.covariance.shape.is_some(), "shaped");
         r.sort_spatially();
+        r
+    }
+
+    /// [`shaped`], its colours stored by footprint (§5.4.6) as the encoder stores them.
+    fn by_footprint(seed: u64, blend: Blend, n: usize) -> Records {
+        let mut r = shaped(seed, blend, n);
+        let colors = r.to_scene().gaussians.colors;
+        r.colors = r.quantize_colors_by_footprint(&colors, 8);
+        assert!(r.colors.footprint.is_some(), "by footprint");
+        r
+    }
+
+    /// The edges of §5.4.6's rule: 256 Gaussians with every pair of 4-bit log-scale codes
+    /// over [−15, 0] (values −15 + q, so `p0 + p1` from −30 to 0 and `s` from −17 to 0),
+    /// under β = −12, so that classes clamp at both ends (`s` below −12 and above −5)
+    /// and every `s` is a negative non-integer but 0 (`floor`, not truncation).
+    fn footprint_edges() -> Records {
+        let mut r = random(21, SceneSpec::new(64, 48, 256, Blend::Sum));
+        let scale = format::Quantizer {
+            bits: 4,
+            min: -15.0,
+            max: 0.0,
+        };
+        let angle = r.covariance.quantizers[2];
+        let n = 256;
+        let codes: Vec<u32> = (0..n)
+            .map(|i| i / 16)
+            .chain((0..n).map(|i| i % 16))
+            .chain(r.covariance.codes[2 * n as usize..].iter().copied())
+            .collect();
+        r.header.cov_param = CovParam::LogScaleRotation;
+        r.covariance = format::Attribute {
+            quantizers: vec![scale, scale, angle],
+            codes,
+            shape: None,
+            footprint: None,
+        };
+        r.colors.footprint = Some(-12);
         r
     }
 
@@ -153,6 +205,7 @@ mod corpus {
             covariance: 6,
             angle: 6,
             angle_by_shape: false,
+            color_by_footprint: false,
             color: 5,
             opacity: 4,
         };
@@ -242,11 +295,45 @@ mod corpus {
             bytes: coded(&shaped_edges(), [&[3, 3], &[0, 0, 5], &[0, 1, 1], &[]], M4),
             expect: None,
         });
+        // Method 5 (§5.4.6), version 1.8: colours at the precision of their footprint, as
+        // the encoder writes `sum` files (angles shaped), beside opacity in an `alpha`
+        // file, and at the edges of the class rule.
+        const M5: u8 = format::METHOD_FOOTPRINT;
+        out.push(CorpusFile {
+            name: "coded5-sum-lsr-3000-footprint.gsi".into(),
+            bytes: coded_each(
+                &by_footprint(22, Sum, 3000),
+                [(&[3, 3], M3), (&[0, 1, 5], M4), (&[0, 1, 1], M5), (&[], M3)],
+            ),
+            expect: None,
+        });
+        out.push(CorpusFile {
+            name: "coded5-alpha-lsr-500-footprint-opacity.gsi".into(),
+            bytes: coded_each(
+                &by_footprint(23, Alpha, 500),
+                [
+                    (&[2, 2], M3),
+                    (&[4, 2, 5], M4),
+                    (&[4, 2, 0], M5),
+                    (&[4], M3),
+                ],
+            ),
+            expect: None,
+        });
+        out.push(CorpusFile {
+            name: "coded5-sum-lsr-256-classes.gsi".into(),
+            bytes: coded_each(
+                &footprint_edges(),
+                [(&[3, 3], M3), (&[4, 4, 0], M3), (&[0, 2, 1], M5), (&[], M3)],
+            ),
+            expect: None,
+        });
         let wide = BitDepths {
             position: 24,
             covariance: 24,
             angle: 24,
             angle_by_shape: false,
+            color_by_footprint: false,
             color: 12,
             opacity: 9,
         };
@@ -574,6 +661,7 @@ mod corpus {
                 covariance: 24,
                 angle: 24,
                 angle_by_shape: false,
+                color_by_footprint: false,
                 color: 8,
                 opacity: 8,
             },
@@ -914,6 +1002,7 @@ mod corpus {
         coded_invalid(&base_records, &mut files);
         coded_raw_invalid(&base_records, &mut files);
         coded_shaped_invalid(&mut files);
+        coded_footprint_invalid(&mut files);
         files
             .into_iter()
             .map(|(kind, what, bytes)| CorpusFile {
@@ -987,8 +1076,9 @@ mod corpus {
                 quantizers: vec![q; comps],
                 codes: all,
                 shape: None,
+                footprint: None,
             };
-            let mut d = a.to_coded_payload(modes, 2).expect("valid modes");
+            let mut d = a.to_coded_payload(modes, 2, None).expect("valid modes");
             d[1 + 9 * k] = 3;
             let packed = (n * (4 * comps - 1)).div_ceil(8) as u32;
             let at = 2 + 9 * comps;
@@ -1102,6 +1192,7 @@ mod corpus {
             quantizers: vec![scale, scale, angle],
             codes,
             shape: Some(offset),
+            footprint: None,
         };
         r
     }
@@ -1142,6 +1233,65 @@ mod corpus {
                 d.pop();
                 d[40..44].copy_from_slice(&(n - 1).to_be_bytes());
             })
+        }));
+    }
+
+    /// Malformed payloads of method 5 (§5.4.6), and method 5 where it is not allowed, each
+    /// in a file that is otherwise valid. The `GCOL` payload has its base at 33, its modes
+    /// at 34, the length of its raw bits at 37, its stream from 41.
+    fn coded_footprint_invalid(files: &mut Vec<(ErrorKind, &'static str, Vec<u8>)>) {
+        use ErrorKind as K;
+        const M3: u8 = format::METHOD_CODED_RAW;
+        const M5: u8 = format::METHOD_FOOTPRINT;
+        let records = by_footprint(24, Blend::Sum, 300);
+        let base = coded_each(
+            &records,
+            [(&[3, 3], M3), (&[0, 1, 5], 4), (&[0, 1, 1], M5), (&[], M3)],
+        );
+        let parts = chunks(&base);
+        let at = |ty: ChunkType| parts.iter().position(|(t, _)| *t == ty).expect("chunk");
+        let edit_in = |ty: ChunkType, f: &dyn Fn(&mut Vec<u8>)| {
+            let mut p = parts.clone();
+            f(&mut p[at(ty)].1);
+            assemble(&p)
+        };
+        let edit = |f: &dyn Fn(&mut Vec<u8>)| edit_in(ChunkType::COLORS, f);
+        let raw_len = |d: &[u8]| u32::from_be_bytes(d[37..41].try_into().expect("4 bytes"));
+        assert_eq!(parts[at(ChunkType::COLORS)].1[28], M5, "method 5");
+        files.push((K::InvalidValue, "coded5-mode-3", edit(&|d| d[35] = 3)));
+        files.push((K::InvalidValue, "coded5-mode-5", edit(&|d| d[36] = 5)));
+        files.push((
+            K::Decompression,
+            "coded5-no-base",
+            edit(&|d| d.truncate(33)),
+        ));
+        files.push((K::Decompression, "coded5-raw-bits-cut", {
+            edit(&|d| {
+                let n = raw_len(d);
+                d.pop();
+                d[37..41].copy_from_slice(&(n - 1).to_be_bytes());
+            })
+        }));
+        // Method 5 in `GCOV` (whose own log-scales it would need) and in `GPOS`.
+        files.push((K::InvalidValue, "coded5-in-gcov", {
+            edit_in(ChunkType::COVARIANCE, &|d| d[28] = M5)
+        }));
+        files.push((K::InvalidValue, "coded5-in-gpos", {
+            edit_in(ChunkType::POSITIONS, &|d| d[19] = M5)
+        }));
+        // `GCOL` before the `GCOV` it is read with (§2.4).
+        files.push((K::ChunkOrder, "coded5-colours-before-covariance", {
+            let mut p = parts.clone();
+            let (cov, col) = (at(ChunkType::COVARIANCE), at(ChunkType::COLORS));
+            p.swap(cov, col);
+            assemble(&p)
+        }));
+        // A `cholesky` file: its covariance holds no log-scales.
+        files.push((K::InvalidValue, "coded5-cholesky", {
+            let mut p = parts.clone();
+            let h = at(ChunkType::HEADER);
+            p[h].1[15] = 0;
+            assemble(&p)
         }));
     }
 

@@ -242,7 +242,7 @@ fn opacity_is_not_stored_when_not_needed() {
 }
 
 #[test]
-fn sum_files_are_written_along_the_curve_with_shaped_angles() {
+fn sum_files_are_written_along_the_curve_with_shaped_angles_and_colours_by_footprint() {
     let t = scene_like(128, 96);
     let e = encode(
         &t,
@@ -252,27 +252,36 @@ fn sum_files_are_written_along_the_curve_with_shaped_angles() {
     )
     .unwrap();
     let f = read_file(&e.bytes[..], Limits::default()).unwrap();
-    // Method 4 (§5.4.5): the angles at the precision of their shape, version 1.7.
+    // Method 4 (§5.4.5): the angles at the precision of their shape; method 5 (§5.4.6):
+    // the colours at the precision of their footprint, version 1.8.
     assert_eq!(
         f.records.header.version_minor,
-        gsi::format::VERSION_MINOR_SHAPED
+        gsi::format::VERSION_MINOR_FOOTPRINT
     );
     assert!(f.records.covariance.shape.is_some());
     assert_eq!(f.records.covariance, e.records.covariance);
+    assert!(f.records.colors.footprint.is_some());
+    assert_eq!(f.records.colors, e.records.colors);
+    assert_eq!(f.records.to_scene(), e.records.to_scene());
     let n = f.records.header.count as usize;
     let (u, v) = f.records.positions.codes.split_at(n);
     let keys: Vec<u64> = (0..n)
         .map(|i| gsi::format::context::morton(u[i], v[i]))
         .collect();
     assert!(keys.windows(2).all(|k| k[0] <= k[1]), "not in Morton order");
-    // The same codes in the 1.0 codings take more bytes.
+    // The same codes in the 1.0 codings take more bytes (the colours' codes packed as
+    // they are, whatever they mean).
+    let plain = |a: &gsi::format::Attribute| gsi::format::Attribute {
+        footprint: None,
+        ..a.clone()
+    };
     let packed: usize = [
         &f.records.positions,
         &f.records.covariance,
         &f.records.colors,
     ]
     .iter()
-    .map(|a| a.to_payload(19).unwrap().len())
+    .map(|a| plain(a).to_payload(19).unwrap().len())
     .sum();
     let coded: usize = [
         &f.records.positions,
@@ -280,7 +289,7 @@ fn sum_files_are_written_along_the_curve_with_shaped_angles() {
         &f.records.colors,
     ]
     .iter()
-    .map(|a| a.to_payload_with(19, true).unwrap().len())
+    .map(|a| f.records.attribute_payload(a, 19, true).unwrap().len())
     .sum();
     assert!(
         coded < packed,

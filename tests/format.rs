@@ -50,16 +50,19 @@ fn spec_method_2_3_and_4_examples_decode() {
         quantizers: vec![q(4), q(4)],
         codes: vec![1, 3, 12, 2, 2, 9],
         shape: None,
+        footprint: None,
     };
     let col = format::Attribute {
         quantizers: vec![q(3), q(3), q(3)],
         codes: vec![7, 1, 4, 6, 1, 5, 6, 0, 5],
         shape: None,
+        footprint: None,
     };
     let cov = format::Attribute {
         quantizers: vec![q(7), q(7), q(7)],
         codes: vec![100, 37, 64, 101, 36, 70, 5, 127, 64],
         shape: None,
+        footprint: None,
     };
     // Log-scales of 3 bits over [−8, −1] (values −8 + q) and a 4-bit angle, shaped.
     let scale = format::Quantizer {
@@ -76,6 +79,7 @@ fn spec_method_2_3_and_4_examples_decode() {
         quantizers: vec![scale, scale, angle],
         codes: vec![4, 5, 6, 4, 3, 0, 8, 11, 2],
         shape: Some(7.0),
+        footprint: None,
     };
     let examples = [
         ("### 9.1 Method 2 payloads", 2, 1, &pos, &[3u8, 3][..]),
@@ -88,8 +92,95 @@ fn spec_method_2_3_and_4_examples_decode() {
         let bytes = spec_block(section, nth);
         let decoded = format::Attribute::from_payload(&bytes, attribute.components(), 3).unwrap();
         assert_eq!(&decoded, attribute, "{section}, example {nth}");
-        assert_eq!(attribute.to_coded_payload(modes, method).unwrap(), bytes);
+        assert_eq!(
+            attribute.to_coded_payload(modes, method, None).unwrap(),
+            bytes
+        );
     }
+}
+
+/// §9.4: the method-5 payload decodes, with the sizes of its Gaussians' log-scales, to its
+/// codes and base; the encoder writes exactly those bytes; and the colours are the
+/// values divided by `2^k`.
+#[test]
+fn spec_method_5_example_decodes() {
+    use gsi::format::footprint::{class, size_of, step};
+    let scales = [(-8.0f32, -8.0f32), (-4.0, -4.0), (-1.0, -1.0)];
+    let sizes: Vec<i32> = scales.iter().map(|&(a, b)| size_of(a, b)).collect();
+    assert_eq!(sizes, [-9, -5, -2]);
+    let q = format::Quantizer {
+        bits: 3,
+        min: 0.0,
+        max: 7.0,
+    };
+    let colors = format::Attribute {
+        quantizers: vec![q; 3],
+        codes: vec![7, 2, 5, 1, 6, 0, 4, 3, 7],
+        shape: None,
+        footprint: Some(-9),
+    };
+    let bytes = spec_block("### 9.4 A method 5 payload", 1);
+    let payload = colors
+        .to_coded_payload(&[0, 1, 4], format::METHOD_FOOTPRINT, Some(&sizes))
+        .unwrap();
+    assert_eq!(payload, bytes, "{payload:02x?}");
+    let decoded = format::Attribute::from_colour_payload(&bytes, 3, &sizes).unwrap();
+    assert_eq!(decoded, colors);
+    let values: Vec<[f32; 3]> = decoded.values();
+    let got: Vec<[f32; 3]> = values
+        .iter()
+        .zip(&sizes)
+        .map(|(v, &s)| v.map(|x| x * step(class(s, -9))))
+        .collect();
+    assert_eq!(
+        got,
+        [
+            [7.0, 1.0, 4.0],
+            [0.125, 0.375, 0.1875],
+            [0.0390625, 0.0, 0.0546875]
+        ]
+    );
+    // Read without the sizes (no log-scale GCOV before it), it is refused.
+    assert!(format::Attribute::from_payload(&bytes, 3, 3).is_err());
+}
+
+/// The corpus file of §5.4.6's edges: every pair of 4-bit log-scale codes over [−15, 0]
+/// under β = −12 reaches both clamps of the class and `floor` below zero (truncation
+/// would put `s` = −8.66 in class 4, not 3), and its colours are the stored values
+/// divided by `2^k`.
+#[test]
+fn spec_colour_classes_at_their_edges() {
+    use gsi::format::footprint::{class, size_of, step};
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/corpus/valid/coded5-sum-lsr-256-classes.gsi"
+    );
+    let file = format::read_file(&std::fs::read(path).unwrap()[..], Limits::default()).unwrap();
+    let r = &file.records;
+    assert_eq!(r.colors.footprint, Some(-12));
+    let s = r.covariance.quantizers[0];
+    let n = 256;
+    let sizes: Vec<i32> = (0..n)
+        .map(|i| {
+            let (a, b) = (r.covariance.codes[i], r.covariance.codes[n + i]);
+            size_of(s.dequantize(a), s.dequantize(b))
+        })
+        .collect();
+    assert_eq!(sizes.iter().min(), Some(&-17));
+    assert_eq!(sizes.iter().max(), Some(&0));
+    // −16 · 0.541… = −8.656…: floor −9, class 3.
+    assert_eq!(size_of(-8.0, -8.0), -9);
+    assert_eq!(class(-9, -12), 3);
+    let classes: Vec<u8> = sizes.iter().map(|&z| class(z, -12)).collect();
+    assert!(classes.contains(&0) && classes.contains(&7));
+    assert!(sizes.iter().any(|&z| z < -12) && sizes.iter().any(|&z| z > -5));
+    let stored: Vec<[f32; 3]> = r.colors.values();
+    let want: Vec<[f32; 3]> = stored
+        .iter()
+        .zip(&classes)
+        .map(|(v, &k)| v.map(|x| x * step(k)))
+        .collect();
+    assert_eq!(r.to_scene().gaussians.colors, want);
 }
 
 /// The corpus file of §5.4.5's edges holds what fitted files rarely reach: a sum just below

@@ -111,7 +111,7 @@ proptest! {
         prop_assume!(q.validate().is_ok() && q.min < q.max);
         let top = q.max_code();
         let codes = |c: usize| -> Vec<u32> { (0..4).map(|i| if (i + c) % 2 == 0 { 0 } else { top }).collect() };
-        let attr = |k: usize| Attribute { quantizers: vec![q; k], codes: (0..k).flat_map(codes).collect(), shape: None };
+        let attr = |k: usize| Attribute { quantizers: vec![q; k], codes: (0..k).flat_map(codes).collect(), shape: None, footprint: None };
         let records = Records { tone: None, weights: gsi::WeightRule::PerPixel,
             header: format::Header::new(9, 7, 4, blend, cp),
             positions: attr(2),
@@ -157,6 +157,7 @@ proptest! {
             covariance: scale,
             angle,
             angle_by_shape: true,
+            color_by_footprint: false,
             ..format::BitDepths::default()
         };
         let records = Records::from_scene(&scene, bits);

@@ -47,10 +47,12 @@ pub struct Args {
     /// Expert override of the bit depths, `POSITION,COVARIANCE,COLOUR,OPACITY[,ANGLE]`
     /// (each 1..=24; without ANGLE, one bit under the covariance's scales); by default
     /// they are chosen from the image size (for 768×512 in `sum` mode: 12,6,8,6,8), and
-    /// in `sum` mode the colour's from the fit's error (5 to 10 bits: coarser where the
+    /// in `sum` mode the colour's from the fit's error (5 to 14 bits: coarser where the
     /// Gaussians cannot follow the texture, so that the bits buy more of them). In `sum`
     /// mode each angle keeps the bits its Gaussian's shape needs, ANGLE being the uniform
-    /// depth whose noise they match (none for a round Gaussian, ANGLE + 2 for the thinnest).
+    /// depth whose noise they match (none for a round Gaussian, ANGLE + 2 for the thinnest),
+    /// and each colour is stored at the precision of its footprint, COLOUR being the depth
+    /// of the grid they share (a Gaussian's step halves for every 8/3 doublings of its area).
     #[arg(long, value_name = "P,C,K,O[,A]")]
     bits: Option<String>,
     /// Initialization: content-adaptive, or the paper's random cold start.
@@ -144,6 +146,7 @@ fn options(args: &Args) -> Result<EncodeOptions, Failure> {
         .transpose()?
         .map(|b| BitDepths {
             angle_by_shape: args.blend == BlendArg::Sum,
+            color_by_footprint: false,
             ..b
         });
     let mut leveled = EncodeOptions::default();
@@ -195,6 +198,7 @@ fn parse_bits(s: &str) -> Result<BitDepths, Failure> {
         covariance,
         angle,
         angle_by_shape: false,
+        color_by_footprint: false,
         color,
         opacity,
     })

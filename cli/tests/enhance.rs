@@ -15,6 +15,7 @@ const BITS: BitDepths = BitDepths {
     covariance: 8,
     angle: 8,
     angle_by_shape: false,
+    color_by_footprint: false,
     color: 8,
     opacity: 6,
 };

@@ -392,6 +392,7 @@ fn resident_steps_follow_the_cpu_steps() {
         // so, as the file stores them. The steps are compared where both do the same.
         let bits = gsi::format::BitDepths {
             angle_by_shape: false,
+            color_by_footprint: false,
             ..default_bits(w, h, blend)
         };
         let mut cpu = Fitter::new(&target, 200, Init::Adaptive, blend, Loss::L2, 3);
@@ -543,6 +544,7 @@ fn cli_enhance_on_the_gpu() {
         covariance: 10,
         angle: 10,
         angle_by_shape: false,
+        color_by_footprint: false,
         color: 10,
         opacity: 8,
     };

@@ -30,6 +30,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         covariance: 12,
         angle: 12,
         angle_by_shape: false,
+        color_by_footprint: false,
         color: 8,
         opacity: 8,
     };
@@ -38,6 +39,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         covariance: 5,
         angle: 5,
         angle_by_shape: false,
+        color_by_footprint: false,
         color: 7,
         opacity: 1,
     };
@@ -46,14 +48,26 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         covariance: 24,
         angle: 24,
         angle_by_shape: false,
+        color_by_footprint: false,
         color: 24,
         opacity: 24,
+    };
+    // The encoder's `sum` depths: angles shaped (§5.4.5), colours by footprint (§5.4.6).
+    const ENCODER: BitDepths = BitDepths {
+        position: 12,
+        covariance: 6,
+        angle: 8,
+        angle_by_shape: true,
+        color_by_footprint: true,
+        color: 9,
+        opacity: 6,
     };
     const NONE: BitDepths = BitDepths {
         position: 0,
         covariance: 0,
         angle: 0,
         angle_by_shape: false,
+        color_by_footprint: false,
         color: 0,
         opacity: 0,
     };
@@ -81,6 +95,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         ("bits-odd",   16, 16,  9, Alpha, Chol, true,  ODD),
         ("bits-24",    16, 16,  6, Sum,   Lsr,  false, WIDE),
         ("bits-0",     16, 16,  6, Alpha, Lsr,  true,  NONE),
+        ("footprint",  40, 30, 50, Sum,   Lsr,  false, ENCODER),
     ];
     for (i, &(name, w, h, n, blend, cov_param, with_opacity, bits)) in cases.iter().enumerate() {
         let mut spec = SceneSpec::new(w, h, n, blend);
@@ -182,9 +197,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             &scene,
             BitDepths {
                 angle_by_shape: true,
+                color_by_footprint: false,
                 ..bits
             },
         );
+        // The colours by footprint (§5.4.6), for method 5, under the sizes the fuzz target
+        // draws from the count.
+        let sizes: Vec<i32> = (0..records.header.count as i32)
+            .map(|i| (i * 7) % 23 - 15)
+            .collect();
+        let colors = records.to_scene().gaussians.colors;
+        let by_footprint = gsi::format::Attribute::footprint_colors(&colors, &sizes, bits.color);
         for (method, attr, a, modes) in [
             (2, "pos", &records.positions, &[3u8, 3][..]),
             (2, "cov", &records.covariance, &[0, 1, 2][..]),
@@ -193,16 +216,22 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             (3, "cov3", &records.covariance, &[0, 1, 4][..]),
             (3, "col3", &records.colors, &[2, 1, 1][..]),
             (4, "cov4", &shaped.covariance, &[0, 1, 5][..]),
+            (5, "col5", &by_footprint, &[0, 1, 1][..]),
         ] {
-            let payload = a.to_coded_payload(modes, method).expect("valid modes");
+            let payload = a
+                .to_coded_payload(modes, method, Some(&sizes))
+                .expect("valid modes");
             let k = a.components();
-            // The top bit chooses method 3, both top bits method 4.
+            // The top bit chooses method 3, both top bits method 4, and bit 5 with them
+            // method 5 (whose low bits 0x23 give three components).
             let top = match method {
                 2 => 0,
                 3 => 0x80,
-                _ => 0xC0,
+                4 => 0xC0,
+                _ => 0xE0,
             };
-            let mut input = vec![(k - 1) as u8 | top];
+            let low = if method == 5 { 0x23 } else { (k - 1) as u8 };
+            let mut input = vec![low | top];
             input.extend((a.count() as u16).to_be_bytes());
             input.extend(a.quantizers.iter().map(|q| q.bits));
             // Modes and stream follow the preamble unchanged.

@@ -1,6 +1,7 @@
 //! Arbitrary Gaussian sets, non-finite floats included, through quantization, the
 //! encoder and the decoder, with the 1.0 codings and with methods 3 and 4 after the
-//! encoder's curve order: the records read back are exactly the records written.
+//! encoder's curve order (colours by footprint in method 5 either way): the records read
+//! back are exactly the records written.
 
 #![no_main]
 
@@ -29,6 +30,9 @@ struct Input {
     /// Angles at the precision of their shape (§5.4.5), where the covariance is
     /// `log-scale-rotation`.
     angle_by_shape: bool,
+    /// Colours at the precision of their footprint (§5.4.6), where the covariance is
+    /// `log-scale-rotation`.
+    color_by_footprint: bool,
     with_opacity: bool,
     /// Taken modulo 25: 0..=24 bits for position, covariance, colour and opacity.
     bits: [u8; 4],
@@ -89,6 +93,7 @@ fuzz_target!(|input: Input| {
             covariance,
             angle: covariance,
             angle_by_shape: input.angle_by_shape,
+            color_by_footprint: input.color_by_footprint,
             color,
             opacity,
         },
@@ -127,6 +132,12 @@ fuzz_target!(|input: Input| {
     // Dequantized values are finite whatever went in (NaN and ±inf included).
     let back = file.records.to_scene();
     assert!(back.gaussians.all_finite());
+    // Colours by footprint exactly where asked for and possible, in method 5 (1.8).
+    let by_footprint = input.color_by_footprint && input.log_scale_rotation;
+    assert_eq!(file.records.colors.footprint.is_some(), by_footprint);
+    if by_footprint {
+        assert!(file.records.header.version_minor >= gsi::format::VERSION_MINOR_FOOTPRINT);
+    }
 
     // The encoder's way: curve order (for `sum`), method 3 where it is smaller (4 where the
     // angles are shaped and that is smaller), version 1.6 (1.7) exactly when some payload
@@ -145,7 +156,9 @@ fuzz_target!(|input: Input| {
         .into_iter()
         .chain(sorted.opacity.as_ref())
         .map(|a| {
-            let p = a.to_payload_with(level, true).expect("in-memory payload");
+            let p = sorted
+                .attribute_payload(a, level, true)
+                .expect("in-memory payload");
             gsi::format::minor_for_method(p[1 + 9 * a.components()])
         })
         .max()

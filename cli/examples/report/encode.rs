@@ -130,11 +130,14 @@ struct Row {
     bits_packed: [f64; 3],
 }
 
-/// Bits per Gaussian of each attribute payload, with or without the coded method (3).
+/// Bits per Gaussian of each attribute payload, with or without the coded method (3);
+/// colours stored by footprint are in method 5 either way.
 fn attribute_bits(r: &gsi::format::Records, coded: bool) -> [f64; 3] {
     let n = f64::from(r.header.count.max(1));
     [&r.positions, &r.covariance, &r.colors].map(|a| {
-        let p = a.to_payload_with(19, coded).expect("in-memory payload");
+        let p = r
+            .attribute_payload(a, 19, coded)
+            .expect("in-memory payload");
         p.len() as f64 * 8.0 / n
     })
 }

@@ -203,13 +203,23 @@ pub fn quantize_colors(
     (width, height): (u32, u32),
     target: &[f32],
     qs: &[Quantizer; 3],
+    steps: Option<&[f32]>,
     (batches, iterations): (usize, usize),
 ) -> Vec<[u32; 3]> {
     let n = projected.len();
-    let round = |c: [f32; 3]| -> [u32; 3] { std::array::from_fn(|ch| qs[ch].quantize(c[ch])) };
-    let value = |q: [u32; 3]| -> [f32; 3] { std::array::from_fn(|ch| qs[ch].dequantize(q[ch])) };
+    // Colours stored by footprint (spec §5.4.6): the code of `c` is that of `c / step`,
+    // and a code's colour its value times `step` (powers of two: exact both ways).
+    let step: Vec<f32> = projected
+        .iter()
+        .map(|g| steps.and_then(|s| s.get(g.index)).copied().unwrap_or(1.0))
+        .collect();
+    let round =
+        |c: [f32; 3], s: f32| -> [u32; 3] { std::array::from_fn(|ch| qs[ch].quantize(c[ch] / s)) };
+    let value = |q: [u32; 3], s: f32| -> [f32; 3] {
+        std::array::from_fn(|ch| qs[ch].dequantize(q[ch]) * s)
+    };
     let mut x: Vec<[f32; 3]> = projected.iter().map(|g| g.color).collect();
-    let mut codes: Vec<[u32; 3]> = x.iter().map(|&c| round(c)).collect();
+    let mut codes: Vec<[u32; 3]> = x.iter().zip(&step).map(|(&c, &s)| round(c, s)).collect();
     if batches <= 1 || iterations == 0 || n < 2 {
         return codes;
     }
@@ -220,8 +230,8 @@ pub fn quantize_colors(
     let mut free = vec![true; n];
     for b in 0..batches {
         for &i in &order[n * b / batches..n * (b + 1) / batches] {
-            codes[i] = round(x[i]);
-            x[i] = value(codes[i]);
+            codes[i] = round(x[i], step[i]);
+            x[i] = value(codes[i], step[i]);
             free[i] = false;
         }
         if b + 1 < batches {

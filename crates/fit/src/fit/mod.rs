@@ -284,6 +284,7 @@ pub fn default_bits(width: u32, height: u32, blend: Blend) -> BitDepths {
         covariance: if blend == Blend::Sum { 6 } else { 8 },
         angle: if blend == Blend::Sum { 8 } else { 7 },
         angle_by_shape: blend == Blend::Sum,
+        color_by_footprint: blend == Blend::Sum,
         color: if blend == Blend::Sum { 8 } else { 7 },
         opacity: 6,
     }
@@ -311,7 +312,8 @@ fn shrunk(n: usize, bpp: f32, budget: f32, px: f32) -> usize {
 }
 
 /// Bytes per Gaussian of `scene`'s attribute payloads as [`finish`] writes them
-/// (quantized with `bits`, in curve order, method 3 or 4 where it is smaller).
+/// (quantized with `bits`, in curve order, method 3 or 4 where it is smaller, colours by
+/// footprint in method 5).
 fn coded_bytes_per_gaussian(scene: &Scene, bits: BitDepths) -> f32 {
     let mut r = Records::from_scene(scene, bits);
     r.sort_spatially();
@@ -319,8 +321,11 @@ fn coded_bytes_per_gaussian(scene: &Scene, bits: BitDepths) -> f32 {
     let bytes: usize = [&r.positions, &r.covariance, &r.colors]
         .into_iter()
         .chain(r.opacity.as_ref())
-        .map(|a| a.to_payload_with(WriteOptions::default().zstd_level, true))
-        .map(|p| p.map_or(0, |p| p.len()))
+        .map(|a| {
+            r.attribute_payload(a, WriteOptions::default().zstd_level, true)
+                .expect("records quantized from a scene have a payload for every attribute")
+                .len()
+        })
         .sum();
     bytes as f32 / n
 }
@@ -764,11 +769,24 @@ const ROUNDING: (usize, usize) = (8, 3);
 /// The codes `nearest` (each colour of `scene`, solved for its geometry, rounded to its
 /// nearest code) rounded instead a batch at a time ([`lsq::quantize_colors`]), over the
 /// same quantizers.
-fn compensated_colors(scene: &Scene, target: &[f32], nearest: &Attribute) -> Attribute {
+fn compensated_colors(
+    scene: &Scene,
+    target: &[f32],
+    nearest: &Attribute,
+    steps: Option<&[f32]>,
+) -> Attribute {
     let qs = std::array::from_fn(|c| nearest.quantizers[c]);
     let (w, h) = (scene.width, scene.height);
     let mut projected = project_scene(scene, w, h);
-    let codes = lsq::quantize_colors(&mut projected, scene.blend, (w, h), target, &qs, ROUNDING);
+    let codes = lsq::quantize_colors(
+        &mut projected,
+        scene.blend,
+        (w, h),
+        target,
+        &qs,
+        steps,
+        ROUNDING,
+    );
     // A Gaussian that touches no pixel keeps its nearest code.
     let mut out = nearest.clone();
     let n = scene.gaussians.len();
@@ -914,7 +932,8 @@ impl Runner<'_, '_> {
         let per_g = 8.0 * f64::from(coded_bytes_per_gaussian(&scene, self.bits));
         let mse = 10f64.powf(-self.last_psnr / 10.0);
         let g = &scene.gaussians;
-        if let Some(b) = depth::color_bits(&g.colors, &g.cov, mse, per_g) {
+        let by_footprint = self.bits.color_by_footprint;
+        if let Some(b) = depth::color_bits(&g.colors, &g.cov, mse, per_g, by_footprint) {
             self.bits.color = b;
         }
     }
@@ -1088,7 +1107,13 @@ pub fn encode(
     };
     let (w, h) = (target.width, target.height);
     let px = (w as f32) * (h as f32);
-    let bits = opts.bits.unwrap_or_else(|| default_bits(w, h, opts.blend));
+    let mut bits = opts.bits.unwrap_or_else(|| default_bits(w, h, opts.blend));
+    // A dark image fitted brightened keeps its colours on one grid, as it keeps their
+    // depth (below): by footprint, the small Gaussians' colours take coarser steps,
+    // and stage 2 lifts whatever noise they add.
+    if opts.bits.is_none() && gain > 1.0 {
+        bits.color_by_footprint = false;
+    }
     let per_g = bytes_per_gaussian(bits, opts.blend);
     let max_n = max_gaussians(px);
     let mut n = match opts.budget {
@@ -1281,9 +1306,10 @@ fn finish(
         let mut stored = records.to_scene();
         stored.gaussians.colors = std::mem::take(&mut scene.gaussians.colors);
         solve_scene_colors(&mut stored, &t.data, 2 * opts.color_solve as usize);
-        let nearest = Attribute::fit(&stored.gaussians.colors, [bits.color; 3]);
+        let nearest = records.quantize_colors(&stored.gaussians.colors, bits.color);
         records.colors = if opts.lab().compensate_rounding {
-            let compensated = compensated_colors(&stored, &t.data, &nearest);
+            let steps = records.color_steps();
+            let compensated = compensated_colors(&stored, &t.data, &nearest, steps.as_deref());
             if matches!(opts.budget, Budget::Bpp(_)) {
                 plain = Some(Records {
                     colors: nearest,

@@ -225,7 +225,10 @@ impl<'g> ResidentFit<'g> {
                     CovParam::LogScaleRotation
                 };
                 // Angles shaped by their Gaussian (`angle_by_shape`) are rendered here at
-                // the uniform depth whose noise the shaping matches, not bucket by bucket.
+                // the uniform depth whose noise the shaping matches, not bucket by bucket;
+                // colours by footprint (`color_by_footprint`) on one grid of their depth
+                // over the colours' own range, not class by class. The file is quantized
+                // on the CPU, exactly.
                 let [_, _, angle] = b.of_covariance(cov);
                 u.bits = [b.position, b.covariance, b.color, b.opacity, angle]
                     .map(|b| u32::from(b.min(MAX_BITS)));

@@ -331,6 +331,7 @@ fn compensated_rounding_beats_rounding_alone() {
             (48, 40),
             &target.data,
             &qs,
+            None,
             (1, 5),
         );
         assert_eq!(single, plain, "{blend:?}");
@@ -340,6 +341,7 @@ fn compensated_rounding_beats_rounding_alone() {
             (48, 40),
             &target.data,
             &qs,
+            None,
             (8, 5),
         );
         assert!(compensated

@@ -17,6 +17,7 @@ use super::coder::{
     Decoder, Encoder, Magnitude, MagnitudeCode, Meter, Signed, Sink, SplitMagnitude, Tree,
 };
 use super::error::{invalid, Error, ErrorKind, Result};
+use super::footprint;
 use super::quant::Quantizer;
 
 /// Which of the two coded methods (the payload's method byte, §5.1).
@@ -30,6 +31,10 @@ pub enum Coding {
     /// Method 4 (§5.4.5, version 1.7): method 3 and mode 5, an angle at the precision of
     /// its Gaussian's shape.
     Method4,
+    /// Method 5 (§5.4.6, version 1.8): method 3's modes 0, 1, 2 and 4 with their contexts
+    /// kept per footprint class, for colours stored at the precision of their footprint
+    /// ([`crate::format::footprint`]).
+    Method5,
 }
 
 /// The code itself, through a `Tree`.
@@ -99,6 +104,53 @@ impl Binarization for Method4 {
     }
 }
 
+/// §5.4.6: method 3's binarizations, contexts per footprint class.
+struct Method5;
+
+impl Binarization for Method5 {
+    type Residual = <Method3 as Binarization>::Residual;
+    type Step = <Method3 as Binarization>::Step;
+    const CODING: Coding = Coding::Method5;
+    fn tree(bits: u8) -> Tree {
+        Method3::tree(bits)
+    }
+}
+
+/// The footprint classes of method 5 (§5.4.6): the file's base and each Gaussian's class.
+#[derive(Clone, Copy, Debug)]
+pub struct Footprint<'a> {
+    pub base: i8,
+    pub classes: &'a [u8],
+}
+
+/// Contexts per class: one set where a payload has no classes, [`footprint::CLASSES`]
+/// where it has.
+struct PerClass<'a, T> {
+    sets: Vec<T>,
+    classes: Option<&'a [u8]>,
+}
+
+impl<'a, T> PerClass<'a, T> {
+    fn new(classes: Option<&'a [u8]>, make: impl Fn() -> T) -> Self {
+        let n = if classes.is_some() {
+            footprint::CLASSES
+        } else {
+            1
+        };
+        PerClass {
+            sets: (0..n).map(|_| make()).collect(),
+            classes,
+        }
+    }
+
+    /// The contexts of Gaussian `i`.
+    #[inline]
+    fn of(&mut self, i: usize) -> &mut T {
+        let k = self.classes.map_or(0, |c| usize::from(c[i]));
+        &mut self.sets[k]
+    }
+}
+
 /// Interleave two codes into a Morton key: bit `j` of `u` becomes bit `2j`, bit `j` of
 /// `v` bit `2j + 1`.
 pub fn morton(u: u32, v: u32) -> u64 {
@@ -136,17 +188,22 @@ fn across(from: &Quantizer, to: &Quantizer, q: u32) -> u32 {
 /// `coding`: the mode bytes, then the coded data, each component in the mode that codes
 /// it in fewest bits. `shape` is the offset of §5.4.5 that component 2's codes follow
 /// (see [`shaped`]); method 4 may then code them in mode 5.
+///
+/// Method 5 takes the footprint classes `fp` of every Gaussian (and writes their base);
+/// the other methods ignore them.
 pub fn encode(
     codes: &[u32],
     count: usize,
     qs: &[Quantizer],
     shape: Option<f32>,
+    fp: Option<Footprint>,
     coding: Coding,
 ) -> Vec<u8> {
     match coding {
-        Coding::Method2 => encode_by::<Method2>(codes, count, qs, None),
-        Coding::Method3 => encode_by::<Method3>(codes, count, qs, None),
-        Coding::Method4 => encode_by::<Method4>(codes, count, qs, shape),
+        Coding::Method2 => encode_by::<Method2>(codes, count, qs, None, None),
+        Coding::Method3 => encode_by::<Method3>(codes, count, qs, None, None),
+        Coding::Method4 => encode_by::<Method4>(codes, count, qs, shape, None),
+        Coding::Method5 => encode_by::<Method5>(codes, count, qs, None, fp),
     }
 }
 
@@ -155,14 +212,16 @@ fn encode_by<B: Binarization>(
     count: usize,
     qs: &[Quantizer],
     shape: Option<f32>,
+    fp: Option<Footprint>,
 ) -> Vec<u8> {
     debug_assert_eq!(codes.len(), count * qs.len());
     let plane = |k: usize| &codes[k * count..(k + 1) * count];
     // Mode 5 is a candidate only where every code of component 2 is its bucket's middle.
     let shape = shape.filter(|&o| qs.len() == 3 && shaped(codes, count, qs, o));
+    let classes = fp.map(|f| f.classes);
     let cost = |k: usize, mode: u8| {
         let mut m = Meter::default();
-        put_component::<B, _>(&mut m, mode, k, qs, shape, &plane);
+        put_component::<B, _>(&mut m, mode, k, qs, shape, classes, &plane);
         m.0
     };
     let best: Vec<(f64, u8)> = (0..qs.len())
@@ -177,10 +236,13 @@ fn encode_by<B: Binarization>(
         })
         .collect();
     let mut modes: Vec<u8> = best.iter().map(|b| b.1).collect();
-    if qs.len() == 2 && cost(0, MODE_MORTON) < best[0].0 + best[1].0 {
+    if qs.len() == 2
+        && single_mode_allowed(MODE_MORTON, 0, 2, B::CODING)
+        && cost(0, MODE_MORTON) < best[0].0 + best[1].0
+    {
         modes = vec![MODE_MORTON; 2];
     }
-    encode_with_modes_by::<B>(codes, count, qs, &modes, shape)
+    encode_with_modes_by::<B>(codes, count, qs, &modes, shape, fp)
 }
 
 /// Whether component 2 of `codes` (three components) holds, for every Gaussian, the
@@ -213,19 +275,22 @@ fn keep_bits<'a>(
 }
 
 /// [`encode`] in the given modes (which must be valid for `qs` and `coding`, as
-/// [`check_modes`] says; mode 5 with `shape` such that [`shaped`] holds).
+/// [`check_modes`] says; mode 5 with `shape` such that [`shaped`] holds; method 5 with
+/// the classes `fp`).
 pub fn encode_with_modes(
     codes: &[u32],
     count: usize,
     qs: &[Quantizer],
     modes: &[u8],
     shape: Option<f32>,
+    fp: Option<Footprint>,
     coding: Coding,
 ) -> Vec<u8> {
     match coding {
-        Coding::Method2 => encode_with_modes_by::<Method2>(codes, count, qs, modes, None),
-        Coding::Method3 => encode_with_modes_by::<Method3>(codes, count, qs, modes, None),
-        Coding::Method4 => encode_with_modes_by::<Method4>(codes, count, qs, modes, shape),
+        Coding::Method2 => encode_with_modes_by::<Method2>(codes, count, qs, modes, None, None),
+        Coding::Method3 => encode_with_modes_by::<Method3>(codes, count, qs, modes, None, None),
+        Coding::Method4 => encode_with_modes_by::<Method4>(codes, count, qs, modes, shape, None),
+        Coding::Method5 => encode_with_modes_by::<Method5>(codes, count, qs, modes, None, fp),
     }
 }
 
@@ -235,16 +300,27 @@ fn encode_with_modes_by<B: Binarization>(
     qs: &[Quantizer],
     modes: &[u8],
     shape: Option<f32>,
+    fp: Option<Footprint>,
 ) -> Vec<u8> {
     let plane = |k: usize| &codes[k * count..(k + 1) * count];
+    let fp = fp.filter(|_| B::CODING == Coding::Method5);
+    assert!(
+        (B::CODING == Coding::Method5) == fp.is_some(),
+        "method 5 takes its classes, and only it"
+    );
+    let classes = fp.map(|f| f.classes);
     let mut e = Encoder::new();
     for (k, &mode) in modes.iter().enumerate() {
         if mode == MODE_MORTON && k == 1 {
             break;
         }
-        put_component::<B, _>(&mut e, mode, k, qs, shape, &plane);
+        put_component::<B, _>(&mut e, mode, k, qs, shape, classes, &plane);
     }
-    let mut out = modes.to_vec();
+    let mut out = Vec::with_capacity(modes.len() + 9);
+    if let Some(f) = fp {
+        out.push(f.base as u8);
+    }
+    out.extend_from_slice(modes);
     if modes.contains(&MODE_SHAPED) {
         out.extend(shape.expect("mode 5 with its offset").to_be_bytes());
     }
@@ -264,6 +340,7 @@ fn put_component<'c, B: Binarization, S: Sink>(
     k: usize,
     qs: &[Quantizer],
     shape: Option<f32>,
+    classes: Option<&[u8]>,
     plane: &impl Fn(usize) -> &'c [u32],
 ) {
     let q = &qs[k];
@@ -279,9 +356,9 @@ fn put_component<'c, B: Binarization, S: Sink>(
         }
         _ if q.bits == 0 => {}
         MODE_DIRECT => {
-            let mut ctx = B::tree(q.bits);
-            for &c in plane(k) {
-                ctx.put(s, c);
+            let mut ctx = PerClass::new(classes, || B::tree(q.bits));
+            for (i, &c) in plane(k).iter().enumerate() {
+                ctx.of(i).put(s, c);
             }
         }
         MODE_RAW => {
@@ -302,16 +379,17 @@ fn put_component<'c, B: Binarization, S: Sink>(
             }
         }
         MODE_ACROSS => {
-            let mut ctx = Signed::<B::Residual>::default();
-            for (&c, &p) in plane(k).iter().zip(plane(k - 1)) {
-                ctx.put(s, i64::from(c) - i64::from(across(&qs[k - 1], q, p)));
+            let mut ctx = PerClass::new(classes, Signed::<B::Residual>::default);
+            for (i, (&c, &p)) in plane(k).iter().zip(plane(k - 1)).enumerate() {
+                ctx.of(i)
+                    .put(s, i64::from(c) - i64::from(across(&qs[k - 1], q, p)));
             }
         }
         _ => {
-            let mut ctx = Signed::<B::Residual>::default();
+            let mut ctx = PerClass::new(classes, Signed::<B::Residual>::default);
             let mut prev = 0u32;
-            for &c in plane(k) {
-                ctx.put(s, i64::from(c) - i64::from(prev));
+            for (i, &c) in plane(k).iter().enumerate() {
+                ctx.of(i).put(s, i64::from(c) - i64::from(prev));
                 prev = c;
             }
         }
@@ -332,7 +410,9 @@ fn out_of_range(what: &str, i: usize, k: usize) -> Error {
 pub fn check_modes(modes: &[u8], coding: Coding) -> Result<()> {
     for (k, &m) in modes.iter().enumerate() {
         let ok = match m {
-            MODE_MORTON => modes == [MODE_MORTON; 2],
+            MODE_MORTON => {
+                modes == [MODE_MORTON; 2] && single_mode_allowed(m, k, modes.len(), coding)
+            }
             _ => single_mode_allowed(m, k, modes.len(), coding),
         };
         if !ok {
@@ -350,28 +430,76 @@ fn single_mode_allowed(mode: u8, k: usize, components: usize, coding: Coding) ->
         MODE_ACROSS => k > 0,
         MODE_RAW => coding != Coding::Method2,
         MODE_SHAPED => coding == Coding::Method4 && k == 2 && components == 3,
+        MODE_MORTON => coding != Coding::Method5,
         _ => false,
     }
 }
 
 /// A decoded coded payload: the planar codes, and the offset of §5.4.5 where a component
 /// was shaped.
+#[derive(Debug)]
 pub struct Decoded {
     pub codes: Vec<u32>,
     pub shape: Option<f32>,
+    /// The base of §5.4.6 of a method-5 payload.
+    pub footprint: Option<i8>,
 }
 
 /// Decode a method-2, 3 or 4 payload's data into `count` planar codes. `data` is the
 /// mode bytes and the coded data (§5.4, §5.4.4, §5.4.5); every byte of it must be used.
-pub fn decode(data: &[u8], count: usize, qs: &[Quantizer], coding: Coding) -> Result<Decoded> {
+///
+/// Method 5 needs `sizes`, the footprint size of every Gaussian
+/// ([`footprint::sizes`] of the file's covariance), and refuses a payload without them.
+pub fn decode(
+    data: &[u8],
+    count: usize,
+    qs: &[Quantizer],
+    coding: Coding,
+    sizes: Option<&[i32]>,
+) -> Result<Decoded> {
     match coding {
-        Coding::Method2 => decode_by::<Method2>(data, count, qs),
-        Coding::Method3 => decode_by::<Method3>(data, count, qs),
-        Coding::Method4 => decode_by::<Method4>(data, count, qs),
+        Coding::Method2 => decode_by::<Method2>(data, count, qs, None),
+        Coding::Method3 => decode_by::<Method3>(data, count, qs, None),
+        Coding::Method4 => decode_by::<Method4>(data, count, qs, None),
+        Coding::Method5 => {
+            let sizes = sizes.ok_or_else(|| {
+                invalid("compression method 5 (colours by footprint) outside a GCOL read after a log-scale GCOV")
+            })?;
+            if sizes.len() != count {
+                return Err(invalid(format!(
+                    "method 5 with {} footprint sizes for {count} Gaussians",
+                    sizes.len()
+                )));
+            }
+            decode_by::<Method5>(data, count, qs, Some(sizes))
+        }
     }
 }
 
-fn decode_by<B: Binarization>(data: &[u8], count: usize, qs: &[Quantizer]) -> Result<Decoded> {
+fn decode_by<B: Binarization>(
+    data: &[u8],
+    count: usize,
+    qs: &[Quantizer],
+    sizes: Option<&[i32]>,
+) -> Result<Decoded> {
+    // Method 5 starts with the base of its classes (§5.4.6).
+    let (base, data) = match sizes {
+        Some(_) => match data.split_first() {
+            Some((&b, rest)) => (Some(b as i8), rest),
+            None => {
+                return Err(Error::new(
+                    ErrorKind::Decompression,
+                    "no bytes of coded data: method 5 starts with its base",
+                ))
+            }
+        },
+        None => (None, data),
+    };
+    let classes = match (sizes, base) {
+        (Some(s), Some(b)) => Some(footprint::classes(s, b)),
+        _ => None,
+    };
+    let classes = classes.as_deref();
     let k_all = qs.len();
     let short = |head: usize| {
         Error::new(
@@ -446,9 +574,9 @@ fn decode_by<B: Binarization>(data: &[u8], count: usize, qs: &[Quantizer]) -> Re
             _ if q.bits == 0 => {}
             MODE_DIRECT => {
                 // A tree of `bits` levels yields codes up to `max` and no further.
-                let mut ctx = B::tree(q.bits);
-                for c in rest[..count].iter_mut() {
-                    *c = ctx.get(&mut d)?;
+                let mut ctx = PerClass::new(classes, || B::tree(q.bits));
+                for (i, c) in rest[..count].iter_mut().enumerate() {
+                    *c = ctx.of(i).get(&mut d)?;
                 }
             }
             MODE_RAW => {
@@ -468,7 +596,7 @@ fn decode_by<B: Binarization>(data: &[u8], count: usize, qs: &[Quantizer]) -> Re
                 }
             }
             mode => {
-                let mut ctx = Signed::<B::Residual>::default();
+                let mut ctx = PerClass::new(classes, Signed::<B::Residual>::default);
                 let prior = &done[(k.max(1) - 1) * count..];
                 // The prediction across components depends on the prior code alone: a
                 // table of it where there are fewer codes than Gaussians.
@@ -480,7 +608,7 @@ fn decode_by<B: Binarization>(data: &[u8], count: usize, qs: &[Quantizer]) -> Re
                         Some(predict) => predict.get(prior[i]),
                         None => prev,
                     };
-                    let c = i64::from(p) + ctx.get(&mut d, usize::from(q.bits) + 1)?;
+                    let c = i64::from(p) + ctx.of(i).get(&mut d, usize::from(q.bits) + 1)?;
                     if c < 0 || c > i64::from(max) {
                         return Err(out_of_range("residual", i, k));
                     }
@@ -492,7 +620,11 @@ fn decode_by<B: Binarization>(data: &[u8], count: usize, qs: &[Quantizer]) -> Re
         k += 1;
     }
     d.finish()?;
-    Ok(Decoded { codes, shape })
+    Ok(Decoded {
+        codes,
+        shape,
+        footprint: base,
+    })
 }
 
 #[cfg(test)]
@@ -522,17 +654,17 @@ mod tests {
 
     /// A payload in `modes`, whichever the encoder would have chosen.
     fn forced(codes: &[u32], n: usize, qs: &[Quantizer], modes: &[u8], c: Coding) -> Vec<u8> {
-        encode_with_modes(codes, n, qs, modes, None, c)
+        encode_with_modes(codes, n, qs, modes, None, None, c)
     }
 
     /// [`super::encode`] of an attribute that is not shaped.
     fn encode(codes: &[u32], n: usize, qs: &[Quantizer], c: Coding) -> Vec<u8> {
-        super::encode(codes, n, qs, None, c)
+        super::encode(codes, n, qs, None, None, c)
     }
 
     /// The codes of [`super::decode`].
     fn decode(data: &[u8], n: usize, qs: &[Quantizer], c: Coding) -> Result<Vec<u32>> {
-        super::decode(data, n, qs, c).map(|d| d.codes)
+        super::decode(data, n, qs, c, None).map(|d| d.codes)
     }
 
     #[test]
@@ -582,6 +714,112 @@ mod tests {
                 assert_eq!(decode(&data, n, &pair, c).unwrap(), codes2);
             }
         }
+    }
+
+    /// Footprint sizes spread over more than the eight classes, and colour codes whose
+    /// spread grows with the class, as a fitted file's stored values do (§5.4.6).
+    fn by_footprint(n: usize, bits: u8, seed: u64) -> (Vec<i32>, Vec<u32>) {
+        let mut rng = test_rng(seed);
+        let sizes: Vec<i32> = (0..n).map(|_| (rng() * 12.0) as i32 - 14).collect();
+        let mid = 1u32 << (bits - 1);
+        let mut codes = vec![0u32; 3 * n];
+        for i in 0..n {
+            let k = footprint::class(sizes[i], -12);
+            let spread = f64::from((1u32 << k).min(mid - 1));
+            for ch in 0..3 {
+                codes[ch * n + i] = (f64::from(mid) + spread * (rng() - 0.5) as f64) as u32;
+            }
+        }
+        (sizes, codes)
+    }
+
+    #[test]
+    fn method_5_roundtrips_in_every_mode_and_needs_its_sizes() {
+        for &(n, bits) in &[(0usize, 8u8), (1, 8), (9, 3), (600, 9), (300, 14)] {
+            let qs = [q(bits, -1.0, 1.0), q(bits, -1.0, 1.0), q(bits, -2.0, 1.0)];
+            let (sizes, codes) = by_footprint(n, bits, 17);
+            let classes = footprint::classes(&sizes, -12);
+            let fp = Some(Footprint {
+                base: -12,
+                classes: &classes,
+            });
+            let chosen = super::encode(&codes, n, &qs, None, fp, Coding::Method5);
+            assert_eq!(chosen[0], (-12i8) as u8, "the base comes first");
+            let mut payloads = vec![chosen];
+            for modes in [[0u8, 1, 1], [2, 2, 2], [4, 4, 4], [0, 2, 4], [4, 1, 0]] {
+                payloads.push(encode_with_modes(
+                    &codes,
+                    n,
+                    &qs,
+                    &modes,
+                    None,
+                    fp,
+                    Coding::Method5,
+                ));
+            }
+            for data in &payloads {
+                let d = super::decode(data, n, &qs, Coding::Method5, Some(&sizes)).unwrap();
+                assert_eq!((d.codes, d.footprint), (codes.clone(), Some(-12)), "n {n}");
+                // Without the sizes, or with another count of them, it is refused.
+                assert!(super::decode(data, n, &qs, Coding::Method5, None).is_err());
+                let short = &sizes[..n.saturating_sub(1)];
+                if n > 0 {
+                    assert!(super::decode(data, n, &qs, Coding::Method5, Some(short)).is_err());
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn method_5_contexts_per_class_pay_where_classes_spread_differently() {
+        let (n, bits) = (4000, 10);
+        let qs = [q(bits, -1.0, 1.0); 3];
+        let (sizes, codes) = by_footprint(n, bits, 3);
+        let classes = footprint::classes(&sizes, -12);
+        let fp = Footprint {
+            base: -12,
+            classes: &classes,
+        };
+        let five = super::encode(&codes, n, &qs, None, Some(fp), Coding::Method5);
+        let three = encode(&codes, n, &qs, Coding::Method3);
+        assert!(
+            five.len() < three.len() * 95 / 100,
+            "method 5 {} bytes, method 3 {}",
+            five.len(),
+            three.len()
+        );
+    }
+
+    #[test]
+    fn method_5_refuses_what_it_does_not_define() {
+        let (n, bits) = (40, 6);
+        let qs = [q(bits, -1.0, 1.0); 3];
+        let (sizes, codes) = by_footprint(n, bits, 8);
+        let classes = footprint::classes(&sizes, -12);
+        let fp = Some(Footprint {
+            base: -12,
+            classes: &classes,
+        });
+        let good = encode_with_modes(&codes, n, &qs, &[0, 1, 1], None, fp, Coding::Method5);
+        let five = |d: &[u8]| super::decode(d, n, &qs, Coding::Method5, Some(&sizes));
+        assert!(five(&good).is_ok());
+        // Modes 3 (Morton) and 5 (shaped) are not method 5's; nor is a byte above 5.
+        for (k, bad) in [(1usize, MODE_MORTON), (2, MODE_SHAPED), (0, 6)] {
+            let mut d = good.clone();
+            d[1 + k] = bad;
+            let e = five(&d).unwrap_err().to_string();
+            assert!(e.contains(&format!("coding mode {bad}")), "{e}");
+        }
+        // No byte at all: not even the base.
+        assert!(super::decode(&[], 0, &qs, Coding::Method5, Some(&[])).is_err());
+        // Truncated anywhere.
+        for cut in 0..good.len() {
+            assert!(five(&good[..cut]).is_err(), "cut at {cut}");
+        }
+        // Another base reads other classes: other contexts, other codes or a refusal.
+        let mut moved = good.clone();
+        moved[0] = moved[0].wrapping_add(2);
+        assert!(five(&moved).map_or(true, |d| d.codes != codes));
     }
 
     #[test]
@@ -696,9 +934,9 @@ mod tests {
             let (a, _) = shaped_attribute(n, 3);
             let o = a.shape.expect("shaped");
             assert!(shaped(&a.codes, n, &a.quantizers, o));
-            let four = super::encode(&a.codes, n, &a.quantizers, a.shape, Coding::Method4);
+            let four = super::encode(&a.codes, n, &a.quantizers, a.shape, None, Coding::Method4);
             assert_eq!(four[2], MODE_SHAPED, "n {n}");
-            let got = super::decode(&four, n, &a.quantizers, Coding::Method4).unwrap();
+            let got = super::decode(&four, n, &a.quantizers, Coding::Method4, None).unwrap();
             assert_eq!(got.codes, a.codes);
             assert_eq!(got.shape, Some(o));
             let three = encode(&a.codes, n, &a.quantizers, Coding::Method3);
@@ -729,7 +967,7 @@ mod tests {
         };
         a.codes[1400 + i] ^= 1;
         assert!(!shaped(&a.codes, 700, &a.quantizers, o));
-        let d = super::encode(&a.codes, 700, &a.quantizers, Some(o), Coding::Method4);
+        let d = super::encode(&a.codes, 700, &a.quantizers, Some(o), None, Coding::Method4);
         assert_ne!(d[2], MODE_SHAPED);
         assert_eq!(
             decode(&d, 700, &a.quantizers, Coding::Method4).unwrap(),
@@ -742,10 +980,10 @@ mod tests {
         let c = Coding::Method4;
         let (a, _) = shaped_attribute(50, 9);
         let qs = &a.quantizers;
-        let good = encode_with_modes(&a.codes, 50, qs, &[0, 0, MODE_SHAPED], a.shape, c);
+        let good = encode_with_modes(&a.codes, 50, qs, &[0, 0, MODE_SHAPED], a.shape, None, c);
         assert_eq!(decode(&good, 50, qs, c).unwrap(), a.codes);
         let err = |d: &[u8], qs: &[Quantizer], c: Coding| {
-            super::decode(d, 50, qs, c)
+            super::decode(d, 50, qs, c, None)
                 .err()
                 .expect("refused")
                 .to_string()
@@ -782,14 +1020,14 @@ mod tests {
         // Cut inside the offset or the raw length; raw bits that end too soon.
         for cut in [4, 8, 10] {
             assert!(
-                super::decode(&good[..cut], 50, qs, c).is_err(),
+                super::decode(&good[..cut], 50, qs, c, None).is_err(),
                 "cut at {cut}"
             );
         }
-        assert!(super::decode(&good, 51, qs, c).is_err());
+        assert!(super::decode(&good, 51, qs, c, None).is_err());
         // Another offset keeps other bits: the payload no longer decodes whole.
         let mut moved = good.clone();
         moved[3..7].copy_from_slice(&(a.shape.unwrap() + 3.0).to_be_bytes());
-        assert!(super::decode(&moved, 50, qs, c).is_err());
+        assert!(super::decode(&moved, 50, qs, c, None).is_err());
     }
 }

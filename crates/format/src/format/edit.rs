@@ -73,7 +73,7 @@ impl ChunkedFile {
         };
         let blame = self.blame(ChunkType::ORIGINAL_COLORS);
         let orc = OriginalColors::parse(&c.data).map_err(&blame)?;
-        orc.validate(&self.file.records.header).map_err(&blame)?;
+        orc.validate(&self.file.records).map_err(&blame)?;
         Ok(Some(orc))
     }
 
@@ -83,7 +83,8 @@ impl ChunkedFile {
         match self.original()? {
             Some(orc) => {
                 let count = self.file.records.header.count;
-                Attribute::parse_standalone(&orc.colors, 3, count, limits)
+                let sizes = self.file.records.footprint_sizes();
+                Attribute::parse_standalone(&orc.colors, 3, count, limits, sizes.as_deref())
                     .map_err(self.blame(ChunkType::ORIGINAL_COLORS))
             }
             None => Ok(self.file.records.colors.clone()),

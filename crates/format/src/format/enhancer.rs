@@ -471,6 +471,7 @@ impl EnhancerRecord {
                 n as u32,
                 limits,
                 &mut budget,
+                None,
             )?);
             rest = &rest[len..];
         }
@@ -718,10 +719,18 @@ impl OriginalColors {
     }
 
     /// The checks of spec §7.3 beyond the framing [`parse`](Self::parse) checks: the
-    /// colours are a `GCOL` payload for `header`, and the metadata, where there is
+    /// colours are a `GCOL` payload for the file of `records` (its count, and its
+    /// covariance where they are stored by footprint), and the metadata, where there is
     /// some, a valid `gCRM` payload.
-    pub fn validate(&self, header: &super::header::Header) -> Result<()> {
-        Attribute::parse_standalone(&self.colors, 3, header.count, &Limits::default())?;
+    pub fn validate(&self, records: &super::records::Records) -> Result<()> {
+        let sizes = records.footprint_sizes();
+        Attribute::parse_standalone(
+            &self.colors,
+            3,
+            records.header.count,
+            &Limits::default(),
+            sizes.as_deref(),
+        )?;
         if let Some(m) = &self.metadata {
             super::meta::CompressionMeta::parse(m)?;
         }

@@ -16,6 +16,9 @@ pub const VERSION_MINOR_CODED: u8 = 1;
 pub const VERSION_MINOR_CODED_RAW: u8 = 6;
 /// Minor version of a file with a payload of compression method 4 (§5.4.5).
 pub const VERSION_MINOR_SHAPED: u8 = 7;
+/// The least minor version of a file that holds a payload of method 5 (colours at the
+/// precision of their footprint, §5.4.6).
+pub const VERSION_MINOR_FOOTPRINT: u8 = 8;
 /// Exact payload length of `GHDR`.
 pub const HEADER_LEN: usize = 18;
 

@@ -11,6 +11,7 @@ pub mod context;
 mod edit;
 mod enhancer;
 mod error;
+pub mod footprint;
 mod header;
 mod limits;
 mod meta;
@@ -31,14 +32,15 @@ pub use enhancer::{
 pub use error::{Error, ErrorKind, Result};
 pub use header::{
     ColorSpace, Header, FLAG_IMPORTANCE_ORDERED, VERSION_MAJOR, VERSION_MINOR, VERSION_MINOR_CODED,
-    VERSION_MINOR_CODED_RAW, VERSION_MINOR_SHAPED,
+    VERSION_MINOR_CODED_RAW, VERSION_MINOR_FOOTPRINT, VERSION_MINOR_SHAPED,
 };
 pub use limits::{Limits, DEFAULT_RENDER_WORK};
 pub use meta::CompressionMeta;
 pub use quant::{Quantizer, MAX_BITS};
 pub use reader::{read_file, Decoder, GsiFile};
 pub use records::{
-    minor_for_method, Attribute, BitDepths, Records, METHOD_CODED, METHOD_CODED_RAW, METHOD_SHAPED,
+    minor_for_method, Attribute, BitDepths, Records, METHOD_CODED, METHOD_CODED_RAW,
+    METHOD_FOOTPRINT, METHOD_SHAPED,
 };
 pub use settings::EncoderSettings;
 pub use writer::{to_bytes, write_file, WriteOptions};
@@ -74,6 +76,7 @@ pub mod tests_support {
             covariance: 8,
             angle: 8,
             angle_by_shape: false,
+            color_by_footprint: false,
             color: 8,
             opacity: 8,
         };

@@ -211,6 +211,7 @@ mod tests {
             quantizers: vec![q],
             codes: codes.clone(),
             shape: None,
+            footprint: None,
         };
         let got: Vec<[f32; 1]> = a.values();
         for (v, &c) in got.iter().zip(&codes) {

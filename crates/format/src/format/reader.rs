@@ -1,12 +1,12 @@
 //! Streaming decoder: parses chunk by chunk from any `Read`, no seeking.
 
 use super::chunk::{self, ChunkInfo, ChunkType, Counting, RawChunk, SIGNATURE};
-use super::error::{Error, ErrorKind, Result};
+use super::error::{invalid, Error, ErrorKind, Result};
 use super::header::{Header, HEADER_LEN};
 use super::limits::{AllocBudget, Limits};
 use super::meta::CompressionMeta;
-use super::records::{Attribute, Records};
-use crate::model::WeightRule;
+use super::records::{attribute_preamble_len, Attribute, Records, METHOD_FOOTPRINT};
+use crate::model::{CovParam, WeightRule};
 use byteorder::{BigEndian, ByteOrder};
 use std::io::Read;
 
@@ -130,8 +130,36 @@ impl<R: Read> Decoder<R> {
                 }
             };
             let (limits, budget) = (&self.limits, &mut self.budget);
+            // Colours stored by footprint (method 5, §5.4.6) read the sizes of a
+            // `log-scale-rotation` covariance read before them (§2.4).
+            let method = c.data.get(attribute_preamble_len(3) - 5).copied();
+            let sizes = match (c.ty, method, &cov, header.cov_param) {
+                (ChunkType::COLORS, _, Some(cov), CovParam::LogScaleRotation) => {
+                    Some(super::footprint::sizes(cov).map_err(here)?)
+                }
+                (ChunkType::COLORS, Some(METHOD_FOOTPRINT), _, CovParam::Cholesky) => {
+                    return Err(here(invalid(
+                        "GCOL in method 5 (colours by footprint) in a cholesky file",
+                    )));
+                }
+                (ChunkType::COLORS, Some(METHOD_FOOTPRINT), None, _) => {
+                    return Err(here(Error::new(
+                        ErrorKind::ChunkOrder,
+                        "GCOL in method 5 (colours by footprint) before GCOV",
+                    )));
+                }
+                _ => None,
+            };
             let mut attr = |comps| {
-                Attribute::parse(&c.data, comps, header.count, limits, budget).map_err(here)
+                Attribute::parse(
+                    &c.data,
+                    comps,
+                    header.count,
+                    limits,
+                    budget,
+                    sizes.as_deref(),
+                )
+                .map_err(here)
             };
             match c.ty {
                 ChunkType::END => break,

@@ -2,9 +2,13 @@
 //! lossless link to the float [`Scene`](crate::model::Scene).
 
 use super::angle;
-use super::context::{self, Coding};
+use super::context::{self, Coding, Footprint};
 use super::error::{invalid, Error, ErrorKind, Result};
-use super::header::{Header, VERSION_MINOR_CODED, VERSION_MINOR_CODED_RAW, VERSION_MINOR_SHAPED};
+use super::footprint;
+use super::header::{
+    Header, VERSION_MINOR_CODED, VERSION_MINOR_CODED_RAW, VERSION_MINOR_FOOTPRINT,
+    VERSION_MINOR_SHAPED,
+};
 use super::limits::{AllocBudget, Limits};
 use super::quant::{self, Quantizer};
 use crate::model::{CovParam, GaussianSet, Scene, WeightRule};
@@ -21,17 +25,23 @@ pub const METHOD_CODED_RAW: u8 = 3;
 /// Method 3 and angles at the precision of their shape (spec §5.4.5; version 1.7): what
 /// the encoder writes where it shapes the angles.
 pub const METHOD_SHAPED: u8 = 4;
+/// Method 3's coding with contexts per footprint class, for colours stored at the
+/// precision of their footprint (spec §5.4.6; version 1.8): what the encoder writes for
+/// `GCOL` in `sum` files.
+pub const METHOD_FOOTPRINT: u8 = 5;
 
 /// The coded methods: each coding, its method byte, and the least minor version of a
 /// file that holds it (§2.5). Newest last.
-const CODED: [(Coding, u8, u8); 3] = [
+const CODED: [(Coding, u8, u8); 4] = [
     (Coding::Method2, METHOD_CODED, VERSION_MINOR_CODED),
     (Coding::Method3, METHOD_CODED_RAW, VERSION_MINOR_CODED_RAW),
     (Coding::Method4, METHOD_SHAPED, VERSION_MINOR_SHAPED),
+    (Coding::Method5, METHOD_FOOTPRINT, VERSION_MINOR_FOOTPRINT),
 ];
 
-/// The newest coded method that a file of minor version `minor` may hold: method 4 from
-/// 1.7, 3 from 1.6, 2 from 1.1, none before. (A file of 1.6 may hold method 2 too.)
+/// The newest coded method that a file of minor version `minor` may hold: method 5 from
+/// 1.8, 4 from 1.7, 3 from 1.6, 2 from 1.1, none before. (A file of 1.6 may hold method
+/// 2 too.)
 pub fn newest_coding(minor: u8) -> Option<Coding> {
     CODED.iter().rev().find(|c| minor >= c.2).map(|c| c.0)
 }
@@ -71,6 +81,11 @@ pub struct Attribute {
     /// shape (each code the middle of its bucket, [`crate::format::angle`]), so that method
     /// 4 may code them in mode 5; `None` for every other attribute.
     pub shape: Option<f32>,
+    /// The base of §5.4.6 where the codes are of colours stored at the precision of their
+    /// footprint (method 5, [`crate::format::footprint`]): each value is then the colour
+    /// times `2^k`, `k` the Gaussian's class, and [`Records::to_scene`] takes the `2^k`
+    /// back. `None` for every other attribute, whose values are what they say.
+    pub footprint: Option<i8>,
 }
 
 impl Attribute {
@@ -92,6 +107,7 @@ impl Attribute {
             quantizers: quantizers.to_vec(),
             codes,
             shape: None,
+            footprint: None,
         }
     }
 
@@ -115,6 +131,25 @@ impl Attribute {
             .min(quant::MAX_BITS);
         let mut a = Attribute::fit(cov, [scale_bits, scale_bits, depth]);
         a.shape = angle::shape(cov, colors, &a.quantizers, &mut a.codes, angle_bits);
+        a
+    }
+
+    /// Colours of `count` Gaussians stored at the precision of their footprint (§5.4.6):
+    /// `colors[i]·2^k` quantized with `bits`-bit quantizers fitted to their range, `k`
+    /// the class of `sizes[i]` ([`footprint::sizes`] of the stored covariance) under the
+    /// base the reference encoder writes ([`footprint::base_for`]).
+    pub fn footprint_colors(colors: &[[f32; 3]], sizes: &[i32], bits: u8) -> Attribute {
+        let base = footprint::base_for(sizes);
+        let stored: Vec<[f32; 3]> = colors
+            .iter()
+            .zip(sizes)
+            .map(|(c, &s)| {
+                let g = footprint::gain(footprint::class(s, base));
+                c.map(|v| v * g)
+            })
+            .collect();
+        let mut a = Attribute::fit(&stored, [bits; 3]);
+        a.footprint = Some(base);
         a
     }
 
@@ -149,9 +184,23 @@ impl Attribute {
     /// A payload of `method` (2, 3 or 4) in the given modes, for the spec's worked examples
     /// and tests; `None` where the method is not a coded one or the modes are not valid
     /// for this attribute (mode 5 where its angles are not shaped).
+    /// Method 5 takes `sizes` ([`footprint::sizes`] of the covariance) and an
+    /// attribute with a [`footprint`](Self::footprint) base.
     #[doc(hidden)]
-    pub fn to_coded_payload(&self, modes: &[u8], method: u8) -> Option<Vec<u8>> {
+    pub fn to_coded_payload(
+        &self,
+        modes: &[u8],
+        method: u8,
+        sizes: Option<&[i32]>,
+    ) -> Option<Vec<u8>> {
         let c = coding(method)?;
+        let classes = match (c, self.footprint, sizes) {
+            (Coding::Method5, Some(base), Some(s)) if s.len() == self.count() => {
+                Some((base, footprint::classes(s, base)))
+            }
+            (Coding::Method5, _, _) => return None,
+            _ => None,
+        };
         let ok = modes.len() == self.components()
             && context::check_modes(modes, c).is_ok()
             && (!modes.contains(&context::MODE_SHAPED)
@@ -165,6 +214,10 @@ impl Attribute {
                 &self.quantizers,
                 modes,
                 self.shape,
+                classes.as_ref().map(|(base, k)| Footprint {
+                    base: *base,
+                    classes: k,
+                }),
                 c,
             );
             self.payload(method, &data)
@@ -182,7 +235,15 @@ impl Attribute {
     /// three whichever is smallest: for a file whose minor version says which methods it
     /// may hold ([`newest_coding`]). Method 4 is tried only for a shaped attribute, and
     /// method 3 beside it, so that only a payload with shaped angles needs version 1.7.
+    ///
+    /// An attribute of colours by footprint has only method 5
+    /// ([`to_footprint_payload`](Self::to_footprint_payload)), and is refused here.
     pub fn to_payload_coded(&self, zstd_level: i32, coded: Option<Coding>) -> Result<Vec<u8>> {
+        if self.footprint.is_some() {
+            return Err(invalid(
+                "colours stored by footprint are written with their covariance (method 5)",
+            ));
+        }
         let packed = quant::pack(&self.codes, self.count(), &self.quantizers);
         let zipped = zstd::bulk::compress(&packed, zstd_level)?;
         let (mut method, mut data) = if zipped.len() < packed.len() {
@@ -190,18 +251,55 @@ impl Attribute {
         } else {
             (METHOD_STORED, packed)
         };
-        let shaped = self.shape.is_some() && coded == Some(Coding::Method4);
+        let shaped =
+            self.shape.is_some() && matches!(coded, Some(Coding::Method4) | Some(Coding::Method5));
         let coded = match coded {
-            Some(Coding::Method4) => Some(Coding::Method3),
+            Some(Coding::Method4) | Some(Coding::Method5) => Some(Coding::Method3),
             c => c,
         };
         for c in coded.into_iter().chain(shaped.then_some(Coding::Method4)) {
-            let d = context::encode(&self.codes, self.count(), &self.quantizers, self.shape, c);
+            let d = context::encode(
+                &self.codes,
+                self.count(),
+                &self.quantizers,
+                self.shape,
+                None,
+                c,
+            );
             if d.len() < data.len() {
                 (method, data) = (method_of(c), d);
             }
         }
         Ok(self.payload(method, &data))
+    }
+
+    /// The payload of colours by footprint (method 5, §5.4.6), for Gaussians of footprint
+    /// `sizes` ([`footprint::sizes`] of the covariance it is written with).
+    pub fn to_footprint_payload(&self, sizes: &[i32]) -> Result<Vec<u8>> {
+        let base = self
+            .footprint
+            .ok_or_else(|| invalid("method 5 for an attribute not stored by footprint"))?;
+        if self.components() != 3 || sizes.len() != self.count() {
+            return Err(invalid(format!(
+                "colours by footprint of {} components for {} sizes",
+                self.components(),
+                sizes.len()
+            )));
+        }
+        let classes = footprint::classes(sizes, base);
+        let fp = Footprint {
+            base,
+            classes: &classes,
+        };
+        let data = context::encode(
+            &self.codes,
+            self.count(),
+            &self.quantizers,
+            None,
+            Some(fp),
+            Coding::Method5,
+        );
+        Ok(self.payload(METHOD_FOOTPRINT, &data))
     }
 
     /// The preamble (§5.1) and `data`.
@@ -224,28 +322,48 @@ impl Attribute {
     /// the spec's worked examples and of the fuzz target of methods 2 and 3.
     #[doc(hidden)]
     pub fn from_payload(payload: &[u8], components: usize, count: u32) -> Result<Attribute> {
-        Self::parse_standalone(payload, components, count, &Limits::default())
+        Self::parse_standalone(payload, components, count, &Limits::default(), None)
+    }
+
+    /// [`from_payload`](Self::from_payload) of colours, with the footprint sizes of the
+    /// file's covariance that a method-5 payload needs (§5.4.6).
+    #[doc(hidden)]
+    pub fn from_colour_payload(payload: &[u8], count: u32, sizes: &[i32]) -> Result<Attribute> {
+        Self::parse_standalone(payload, 3, count, &Limits::default(), Some(sizes))
     }
 
     /// [`parse`](Self::parse) with its own allocation budget, for a payload found outside
     /// the normal chunk sequence (inside `gORC`).
+    /// `sizes` as for [`parse`](Self::parse).
     pub fn parse_standalone(
         p: &[u8],
         components: usize,
         count: u32,
         limits: &Limits,
+        sizes: Option<&[i32]>,
     ) -> Result<Attribute> {
-        Self::parse(p, components, count, limits, &mut AllocBudget::new(limits))
+        Self::parse(
+            p,
+            components,
+            count,
+            limits,
+            &mut AllocBudget::new(limits),
+            sizes,
+        )
     }
 
     /// Parse an attribute chunk payload holding `count` records of `components` components.
     /// Sizes are checked against `limits` and `budget` before anything is allocated.
+    /// `sizes`: the footprint size of every Gaussian ([`footprint::sizes`] of the file's
+    /// `log-scale-rotation` covariance), which a method-5 payload needs and is refused
+    /// without; `None` where there is no such covariance.
     pub fn parse(
         p: &[u8],
         components: usize,
         count: u32,
         limits: &Limits,
         budget: &mut AllocBudget,
+        sizes: Option<&[i32]>,
     ) -> Result<Attribute> {
         let pre = attribute_preamble_len(components);
         if p.len() < pre {
@@ -313,16 +431,25 @@ impl Attribute {
                 }
                 &zipped
             }
-            METHOD_CODED | METHOD_CODED_RAW | METHOD_SHAPED => &[],
+            METHOD_FOOTPRINT if components != 3 => {
+                return Err(invalid(format!(
+                    "compression method 5 for an attribute of {components} components"
+                )))
+            }
+            METHOD_CODED | METHOD_CODED_RAW | METHOD_SHAPED | METHOD_FOOTPRINT => &[],
             m => return Err(invalid(format!("compression method {m}"))),
         };
         let ncodes = u64::from(count) * components as u64;
         budget.reserve(ncodes * 4, "attribute codes")?;
-        let (codes, shape) = if let Some(c) = coding(method) {
-            let d = context::decode(data, count as usize, &quantizers, c)?;
-            (d.codes, d.shape)
+        let (codes, shape, footprint) = if let Some(c) = coding(method) {
+            let d = context::decode(data, count as usize, &quantizers, c, sizes)?;
+            (d.codes, d.shape, d.footprint)
         } else {
-            (quant::unpack(packed, count as usize, &quantizers), None)
+            (
+                quant::unpack(packed, count as usize, &quantizers),
+                None,
+                None,
+            )
         };
         if method == METHOD_ZSTD {
             budget.release(expected);
@@ -331,6 +458,7 @@ impl Attribute {
             quantizers,
             codes,
             shape,
+            footprint,
         })
     }
 }
@@ -367,6 +495,11 @@ pub struct BitDepths {
     /// noise of `angle` uniform bits, in fewer ([`Attribute::shaped_angles`]).
     /// For `log-scale-rotation` only.
     pub angle_by_shape: bool,
+    /// Colours at the precision of their footprint (spec §5.4.6, method 5): `color` bits
+    /// over the range of the colours times `2^k`, each Gaussian's step halved for every
+    /// doubling of its side ([`Attribute::footprint_colors`]). For `log-scale-rotation`
+    /// only.
+    pub color_by_footprint: bool,
     pub color: u8,
     pub opacity: u8,
 }
@@ -390,6 +523,7 @@ impl Default for BitDepths {
             covariance: 12,
             angle: 12,
             angle_by_shape: false,
+            color_by_footprint: false,
             color: 8,
             opacity: 8,
         }
@@ -410,6 +544,18 @@ impl Records {
                 let o: Vec<[f32; 1]> = o.iter().map(|&a| [a]).collect();
                 Attribute::fit(&o, [bits.opacity])
             });
+        let log_scales = scene.cov_param == CovParam::LogScaleRotation;
+        let covariance = if bits.angle_by_shape && log_scales {
+            Attribute::shaped_angles(&g.cov, &g.colors, bits.covariance, bits.angle)
+        } else {
+            Attribute::fit(&g.cov, bits.of_covariance(scene.cov_param))
+        };
+        let colors = match footprint::sizes(&covariance) {
+            Ok(sizes) if bits.color_by_footprint && log_scales => {
+                Attribute::footprint_colors(&g.colors, &sizes, bits.color)
+            }
+            _ => Attribute::fit(&g.colors, [bits.color; 3]),
+        };
         Records {
             header: Header::new(
                 scene.width,
@@ -419,12 +565,8 @@ impl Records {
                 scene.cov_param,
             ),
             positions: Attribute::fit(&g.positions, [bits.position; 2]),
-            covariance: if bits.angle_by_shape && scene.cov_param == CovParam::LogScaleRotation {
-                Attribute::shaped_angles(&g.cov, &g.colors, bits.covariance, bits.angle)
-            } else {
-                Attribute::fit(&g.cov, bits.of_covariance(scene.cov_param))
-            },
-            colors: Attribute::fit(&g.colors, [bits.color; 3]),
+            covariance,
+            colors,
             opacity,
             tone: scene.tone.clone(),
             weights: scene.weights,
@@ -442,7 +584,7 @@ impl Records {
             gaussians: GaussianSet {
                 positions: self.positions.values(),
                 cov: self.covariance.values(),
-                colors: self.colors.values(),
+                colors: self.color_values(),
                 opacity: self
                     .opacity
                     .as_ref()
@@ -450,6 +592,83 @@ impl Records {
             },
             tone: self.tone.clone(),
             weights: self.weights,
+        }
+    }
+
+    /// The colours of every Gaussian: the stored values, divided by `2^k` where they are
+    /// stored by footprint (§5.4.6).
+    pub fn color_values(&self) -> Vec<[f32; 3]> {
+        let mut colors: Vec<[f32; 3]> = self.colors.values();
+        if let Some(steps) = self.color_steps() {
+            for (c, s) in colors.iter_mut().zip(steps) {
+                *c = c.map(|v| v * s);
+            }
+        }
+        colors
+    }
+
+    /// `2^−k` of each Gaussian where the colours are stored by footprint (§5.4.6): a
+    /// colour is its stored value times this, exactly. `None` for colours stored as
+    /// they are.
+    pub fn color_steps(&self) -> Option<Vec<f32>> {
+        let base = self.colors.footprint?;
+        let sizes = footprint::sizes(&self.covariance).ok()?;
+        Some(
+            sizes
+                .iter()
+                .map(|&s| footprint::step(footprint::class(s, base)))
+                .collect(),
+        )
+    }
+
+    /// The payload of `attribute`, one of these records' own, as [`write_file`] writes
+    /// it: colours stored by footprint in method 5 (they have no other), every other
+    /// attribute by [`Attribute::to_payload_with`] with `coded`.
+    ///
+    /// [`write_file`]: crate::format::write_file
+    pub fn attribute_payload(
+        &self,
+        attribute: &Attribute,
+        zstd_level: i32,
+        coded: bool,
+    ) -> Result<Vec<u8>> {
+        if attribute.footprint.is_none() {
+            return attribute.to_payload_with(zstd_level, coded);
+        }
+        let sizes = self.footprint_sizes().ok_or_else(|| {
+            invalid("colours stored by footprint need a log-scale-rotation covariance")
+        })?;
+        attribute.to_footprint_payload(&sizes)
+    }
+
+    /// The footprint sizes ([`footprint::sizes`]) that colours stored by footprint in a
+    /// file of these records are read with: `None` where the covariance is not
+    /// `log-scale-rotation`.
+    pub fn footprint_sizes(&self) -> Option<Vec<i32>> {
+        (self.header.cov_param == CovParam::LogScaleRotation)
+            .then(|| footprint::sizes(&self.covariance).ok())
+            .flatten()
+    }
+
+    /// Quantize `colors` (one per Gaussian) by footprint (§5.4.6) with these records'
+    /// covariance, at `bits`; on one grid where the covariance is not
+    /// `log-scale-rotation`.
+    pub fn quantize_colors_by_footprint(&self, colors: &[[f32; 3]], bits: u8) -> Attribute {
+        match self.footprint_sizes() {
+            Some(sizes) if sizes.len() == colors.len() => {
+                Attribute::footprint_colors(colors, &sizes, bits)
+            }
+            _ => Attribute::fit(colors, [bits; 3]),
+        }
+    }
+
+    /// Quantize `colors` (one per Gaussian) as these records store their colours: by
+    /// footprint at the colour depth where they are, else with quantizers fitted to
+    /// their range at `bits`.
+    pub fn quantize_colors(&self, colors: &[[f32; 3]], bits: u8) -> Attribute {
+        match self.colors.footprint {
+            Some(_) => self.quantize_colors_by_footprint(colors, bits),
+            None => Attribute::fit(colors, [bits; 3]),
         }
     }
 

@@ -20,7 +20,9 @@ pub struct WriteOptions {
     /// Also consider compression method 3 (§5.4.4) for each attribute, and method 4
     /// (§5.4.5) for one whose angles are shaped, keeping the smallest payload; a file that
     /// uses method 3 is written as version 1.6 and one that uses method 4 as 1.7, which
-    /// earlier decoders refuse ("compression method 3", "… 4"). Off by default, so that a plain write
+    /// earlier decoders refuse ("compression method 3", "… 4"). (Colours stored by
+    /// footprint are written in method 5, version 1.8, whatever this says: no other
+    /// method holds them.) Off by default, so that a plain write
     /// stays readable by every 1.0 decoder; the encoder turns it on. (Method 2, for
     /// decoders of 1.1–1.5, is written only where a file already of such a minor is
     /// rewritten for stage 2, which keeps its `GHDR`.)
@@ -73,7 +75,9 @@ pub fn write_file<W: Write>(w: &mut W, records: &Records, opts: &WriteOptions) -
     let mut minor = 0;
     for (ty, a) in attributes {
         if let Some(a) = a {
-            let p = a.to_payload_with(opts.zstd_level, opts.context_coding)?;
+            // Colours stored by footprint take method 5 whatever the options: no other
+            // says what their values mean (§5.4.6).
+            let p = records.attribute_payload(a, opts.zstd_level, opts.context_coding)?;
             minor = minor.max(minor_for_method(
                 p[attribute_preamble_len(a.components()) - 5],
             ));
