@@ -77,7 +77,11 @@ fuzz_target!(|data: &[u8]| {
     let Ok(a) = read(&payload) else {
         return;
     };
-    assert_eq!(a.footprint.map(|b| b as u8), base, "the base is the payload's");
+    assert_eq!(
+        a.footprint.map(|b| b as u8),
+        base,
+        "the base is the payload's"
+    );
     let n = count as usize;
     assert_eq!(a.codes.len(), n * k);
     for (plane, q) in a.codes.chunks(n.max(1)).zip(&a.quantizers) {

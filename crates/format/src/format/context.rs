@@ -62,7 +62,7 @@ trait Binarization {
     type Step: MagnitudeCode;
     /// The method whose binarization this is.
     const CODING: Coding;
-    /// Methods 3 and 4: the data holds the length of its raw bits, and mode 4 is allowed.
+    /// Methods 3 to 5: the data holds the length of its raw bits, and mode 4 is allowed.
     const RAW: bool = !matches!(Self::CODING, Coding::Method2);
     /// The tree of mode 0 for codes of `bits` bits.
     fn tree(bits: u8) -> Tree;
@@ -80,39 +80,26 @@ impl Binarization for Method2 {
     }
 }
 
-/// §5.4.4: split trees and magnitudes, a step's `e` through a tree.
-struct Method3;
+/// §5.4.4's binarizations (split trees and magnitudes, a step's `e` through a tree),
+/// which methods 3, 4 (§5.4.5: and mode 5) and 5 (§5.4.6: contexts per footprint class)
+/// share: they differ in their modes and contexts, not in how a code becomes decisions.
+/// `M` is the method's number.
+struct RawBits<const M: u8>;
 
-impl Binarization for Method3 {
+type Method3 = RawBits<3>;
+type Method4 = RawBits<4>;
+type Method5 = RawBits<5>;
+
+impl<const M: u8> Binarization for RawBits<M> {
     type Residual = SplitMagnitude<false>;
     type Step = SplitMagnitude<true>;
-    const CODING: Coding = Coding::Method3;
+    const CODING: Coding = match M {
+        3 => Coding::Method3,
+        4 => Coding::Method4,
+        _ => Coding::Method5,
+    };
     fn tree(bits: u8) -> Tree {
         Tree::split(bits)
-    }
-}
-
-/// §5.4.5: method 3's binarizations, and mode 5.
-struct Method4;
-
-impl Binarization for Method4 {
-    type Residual = <Method3 as Binarization>::Residual;
-    type Step = <Method3 as Binarization>::Step;
-    const CODING: Coding = Coding::Method4;
-    fn tree(bits: u8) -> Tree {
-        Method3::tree(bits)
-    }
-}
-
-/// §5.4.6: method 3's binarizations, contexts per footprint class.
-struct Method5;
-
-impl Binarization for Method5 {
-    type Residual = <Method3 as Binarization>::Residual;
-    type Step = <Method3 as Binarization>::Step;
-    const CODING: Coding = Coding::Method5;
-    fn tree(bits: u8) -> Tree {
-        Method3::tree(bits)
     }
 }
 
@@ -984,8 +971,7 @@ mod tests {
         assert_eq!(decode(&good, 50, qs, c).unwrap(), a.codes);
         let err = |d: &[u8], qs: &[Quantizer], c: Coding| {
             super::decode(d, 50, qs, c, None)
-                .err()
-                .expect("refused")
+                .expect_err("refused")
                 .to_string()
         };
         // Mode 5 on components 0 and 1, in method 3, on an attribute of two components.

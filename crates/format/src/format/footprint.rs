@@ -22,7 +22,7 @@
 //! gets the same colours.
 
 use super::error::{invalid, Result};
-use super::records::Attribute;
+use super::quant::Quantizer;
 
 /// Classes of §5.4.6: `k` in `0..CLASSES`, a step `2^−k` of the stored grid's.
 pub const CLASSES: usize = 8;
@@ -33,19 +33,19 @@ pub const SIZE_PER_LOG_SCALE: f64 = 0.5410106403333613;
 /// `floor((p0 + p1)·SIZE_PER_LOG_SCALE)`, `floor(⅜·log2(s1·s2))`, of each Gaussian of a
 /// `log-scale-rotation` covariance, clamped to `±256` (where every base gives the same
 /// class); an error for an attribute that is not of three components.
-pub fn sizes(cov: &Attribute) -> Result<Vec<i32>> {
-    if cov.components() != 3 {
+/// `qs` and `codes` are the covariance attribute's quantizers and planar codes.
+pub fn sizes(qs: &[Quantizer], codes: &[u32]) -> Result<Vec<i32>> {
+    if qs.len() != 3 || codes.len() % 3 != 0 {
         return Err(invalid(format!(
             "colours by footprint need a covariance of 3 components, not {}",
-            cov.components()
+            qs.len()
         )));
     }
-    let n = cov.count();
-    let qs = &cov.quantizers;
+    let n = codes.len() / 3;
     let v0 = qs[0].lookup(n, |c| qs[0].dequantize(c));
     let v1 = qs[1].lookup(n, |c| qs[1].dequantize(c));
     Ok((0..n)
-        .map(|i| size_of(v0.get(cov.codes[i]), v1.get(cov.codes[n + i])))
+        .map(|i| size_of(v0.get(codes[i]), v1.get(codes[n + i])))
         .collect())
 }
 
@@ -96,7 +96,6 @@ pub fn base_for(sizes: &[i32]) -> i8 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::format::Quantizer;
 
     #[test]
     fn sizes_are_three_eighths_log2_of_the_area_floored() {
@@ -134,7 +133,7 @@ mod tests {
     #[test]
     fn sizes_need_three_components() {
         let q = Quantizer::fit(4, [0.0f32, 1.0]);
-        let two = Attribute::quantize(&[[0.0f32, 1.0]], [q, q]);
-        assert!(sizes(&two).is_err());
+        assert!(sizes(&[q, q], &[0, 15]).is_err());
+        assert_eq!(sizes(&[q, q, q], &[0, 15, 3]).unwrap().len(), 1);
     }
 }

@@ -135,7 +135,8 @@ impl<R: Read> Decoder<R> {
             let method = c.data.get(attribute_preamble_len(3) - 5).copied();
             let sizes = match (c.ty, method, &cov, header.cov_param) {
                 (ChunkType::COLORS, _, Some(cov), CovParam::LogScaleRotation) => {
-                    Some(super::footprint::sizes(cov).map_err(here)?)
+                    let cov: &Attribute = cov;
+                    Some(super::footprint::sizes(&cov.quantizers, &cov.codes).map_err(here)?)
                 }
                 (ChunkType::COLORS, Some(METHOD_FOOTPRINT), _, CovParam::Cholesky) => {
                     return Err(here(invalid(

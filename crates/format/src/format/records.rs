@@ -550,7 +550,7 @@ impl Records {
         } else {
             Attribute::fit(&g.cov, bits.of_covariance(scene.cov_param))
         };
-        let colors = match footprint::sizes(&covariance) {
+        let colors = match footprint::sizes(&covariance.quantizers, &covariance.codes) {
             Ok(sizes) if bits.color_by_footprint && log_scales => {
                 Attribute::footprint_colors(&g.colors, &sizes, bits.color)
             }
@@ -612,7 +612,7 @@ impl Records {
     /// they are.
     pub fn color_steps(&self) -> Option<Vec<f32>> {
         let base = self.colors.footprint?;
-        let sizes = footprint::sizes(&self.covariance).ok()?;
+        let sizes = footprint::sizes(&self.covariance.quantizers, &self.covariance.codes).ok()?;
         Some(
             sizes
                 .iter()
@@ -646,7 +646,7 @@ impl Records {
     /// `log-scale-rotation`.
     pub fn footprint_sizes(&self) -> Option<Vec<i32>> {
         (self.header.cov_param == CovParam::LogScaleRotation)
-            .then(|| footprint::sizes(&self.covariance).ok())
+            .then(|| footprint::sizes(&self.covariance.quantizers, &self.covariance.codes).ok())
             .flatten()
     }
 
