@@ -113,7 +113,10 @@ mod corpus {
     fn by_footprint(seed: u64, blend: Blend, n: usize) -> Records {
         let mut r = shaped(seed, blend, n);
         let colors = r.to_scene().gaussians.colors;
-        r.colors = r.quantize_colors_by_footprint(&colors, 8);
+        let sizes = r
+            .footprint_sizes()
+            .expect("a log-scale-rotation covariance");
+        r.colors = format::Attribute::footprint_colors(&colors, &sizes, 8);
         assert!(r.colors.footprint.is_some(), "by footprint");
         r
     }

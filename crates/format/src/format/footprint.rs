@@ -15,7 +15,7 @@
 //! (`gsi_fit`'s compensated rounding), so the large Gaussians' rounding already costs less
 //! than their footprint says, and the small ones', rounded last, the most. On the
 //! validation images at 1 bpp (photos12 and LOL eval15's normal-light images, against
-//! colours on one grid): ½ gained +0.05 dB, ⅜ +0.08, ¼ +0.02 (BENCHMARKS.md).
+//! colours on one grid): ½ gained +0.05 dB, ⅜ +0.09, ¼ +0.03 (BENCHMARKS.md).
 //!
 //! The class is exact binary64 arithmetic on the dequantized scales (§5.2), one product
 //! and a `floor`, and the scaling is by a power of two, exact in binary32: every decoder

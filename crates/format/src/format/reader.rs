@@ -113,7 +113,8 @@ impl<R: Read> Decoder<R> {
     /// Read the remaining chunks through `GEND` and assemble the file.
     pub fn finish(mut self) -> Result<GsiFile> {
         let header = self.read_header()?;
-        let (mut pos, mut cov, mut col, mut opa, mut meta) = (None, None, None, None, None);
+        let (mut pos, mut col, mut opa, mut meta) = (None, None, None, None);
+        let mut cov: Option<Attribute> = None;
         let mut tone = None;
         let mut columns: Option<WeightRule> = None;
         // Stage 2's chunks are kept unparsed (spec §2.3), but each may appear once.
@@ -131,13 +132,16 @@ impl<R: Read> Decoder<R> {
             };
             let (limits, budget) = (&self.limits, &mut self.budget);
             // Colours stored by footprint (method 5, §5.4.6) read the sizes of a
-            // `log-scale-rotation` covariance read before them (§2.4).
+            // `log-scale-rotation` covariance read before them (§2.4); no other payload
+            // needs them.
             let method = c.data.get(attribute_preamble_len(3) - 5).copied();
             let sizes = match (c.ty, method, &cov, header.cov_param) {
-                (ChunkType::COLORS, _, Some(cov), CovParam::LogScaleRotation) => {
-                    let cov: &Attribute = cov;
-                    Some(super::footprint::sizes(&cov.quantizers, &cov.codes).map_err(here)?)
-                }
+                (
+                    ChunkType::COLORS,
+                    Some(METHOD_FOOTPRINT),
+                    Some(cov),
+                    CovParam::LogScaleRotation,
+                ) => Some(super::footprint::sizes(&cov.quantizers, &cov.codes).map_err(here)?),
                 (ChunkType::COLORS, Some(METHOD_FOOTPRINT), _, CovParam::Cholesky) => {
                     return Err(here(invalid(
                         "GCOL in method 5 (colours by footprint) in a cholesky file",

@@ -181,7 +181,7 @@ impl Attribute {
         self.to_payload_with(zstd_level, false)
     }
 
-    /// A payload of `method` (2, 3 or 4) in the given modes, for the spec's worked examples
+    /// A payload of `method` (2 to 5) in the given modes, for the spec's worked examples
     /// and tests; `None` where the method is not a coded one or the modes are not valid
     /// for this attribute (mode 5 where its angles are not shaped).
     /// Method 5 takes `sizes` ([`footprint::sizes`] of the covariance) and an
@@ -550,11 +550,12 @@ impl Records {
         } else {
             Attribute::fit(&g.cov, bits.of_covariance(scene.cov_param))
         };
-        let colors = match footprint::sizes(&covariance.quantizers, &covariance.codes) {
-            Ok(sizes) if bits.color_by_footprint && log_scales => {
-                Attribute::footprint_colors(&g.colors, &sizes, bits.color)
-            }
-            _ => Attribute::fit(&g.colors, [bits.color; 3]),
+        let sizes = (bits.color_by_footprint && log_scales)
+            .then(|| footprint::sizes(&covariance.quantizers, &covariance.codes).ok())
+            .flatten();
+        let colors = match sizes {
+            Some(sizes) => Attribute::footprint_colors(&g.colors, &sizes, bits.color),
+            None => Attribute::fit(&g.colors, [bits.color; 3]),
         };
         Records {
             header: Header::new(
@@ -650,25 +651,16 @@ impl Records {
             .flatten()
     }
 
-    /// Quantize `colors` (one per Gaussian) by footprint (§5.4.6) with these records'
-    /// covariance, at `bits`; on one grid where the covariance is not
-    /// `log-scale-rotation`.
-    pub fn quantize_colors_by_footprint(&self, colors: &[[f32; 3]], bits: u8) -> Attribute {
-        match self.footprint_sizes() {
-            Some(sizes) if sizes.len() == colors.len() => {
-                Attribute::footprint_colors(colors, &sizes, bits)
-            }
-            _ => Attribute::fit(colors, [bits; 3]),
-        }
-    }
-
     /// Quantize `colors` (one per Gaussian) as these records store their colours: by
     /// footprint at the colour depth where they are, else with quantizers fitted to
     /// their range at `bits`.
     pub fn quantize_colors(&self, colors: &[[f32; 3]], bits: u8) -> Attribute {
-        match self.colors.footprint {
-            Some(_) => self.quantize_colors_by_footprint(colors, bits),
-            None => Attribute::fit(colors, [bits; 3]),
+        let sizes = self.colors.footprint.and(self.footprint_sizes());
+        match sizes {
+            Some(sizes) if sizes.len() == colors.len() => {
+                Attribute::footprint_colors(colors, &sizes, bits)
+            }
+            _ => Attribute::fit(colors, [bits; 3]),
         }
     }
 
